@@ -1,0 +1,47 @@
+# Two commands do all set-up on a fresh Debian/Ubuntu machine with Python 3.11 and make:
+#   make demo   - runs the main job on the bundled real data
+#   make test   - runs the test suite
+# Both create/update the virtual environment .venv from environment.txt on first use.
+
+PYTHON ?= python3
+VENV := .venv
+BIN := $(VENV)/bin
+STAMP := $(VENV)/.installed
+OUT ?= outputs
+
+.PHONY: demo test bench notebooks system-deps clean
+
+$(STAMP): environment.txt pyproject.toml
+	@$(MAKE) --no-print-directory system-deps
+	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+	$(BIN)/python -m pip install --quiet -r environment.txt
+	$(BIN)/python -m pip install --quiet --no-deps -e .
+	@touch $(STAMP)
+
+# open3d needs the system library libusb-1.0: install it when missing (as root), else say how.
+system-deps:
+	@if ! ldconfig -p 2>/dev/null | grep -q 'libusb-1.0.so.0'; then \
+	  if [ "$$(id -u)" = "0" ] && command -v apt-get >/dev/null; then \
+	    echo "installing libusb-1.0-0 (needed by open3d) with apt-get"; \
+	    (apt-get install -y -q libusb-1.0-0 >/dev/null 2>&1 || \
+	     (apt-get update -q >/dev/null && apt-get install -y -q libusb-1.0-0 >/dev/null)) || \
+	     { echo "apt-get install libusb-1.0-0 failed"; exit 1; }; \
+	  else \
+	    echo "open3d needs the system library libusb-1.0. Run:  sudo apt-get install -y libusb-1.0-0"; \
+	    exit 1; \
+	  fi; \
+	fi
+
+demo: $(STAMP)
+	$(BIN)/tpvp demo --output $(OUT)/demo
+
+test: $(STAMP)
+	$(BIN)/python -m pytest -n 2 tests
+
+bench: $(STAMP)
+	$(BIN)/python -m pip install --quiet -r benchmarks/requirements.txt
+	$(BIN)/python benchmarks/sensor_bench.py
+
+clean:
+	rm -rf $(VENV) $(OUT) .pytest_cache

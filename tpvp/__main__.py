@@ -1,0 +1,5 @@
+import sys
+
+from tpvp.cli import main
+
+sys.exit(main())

@@ -1,0 +1,27 @@
+"""Exceptions raised on bad input.
+
+Every error the user can cause (missing file, malformed header, empty cloud, wrong units, a camera
+inside the geometry, ...) is raised as a :class:`TpvpError` subclass with a message that names the
+file or argument. The CLI prints the message on one line and exits with status 2 instead of showing
+a traceback.
+"""
+
+
+class TpvpError(Exception):
+    """Base class of all errors caused by input the user can fix."""
+
+
+class InputFileError(TpvpError, OSError):
+    """A file is missing, unreadable, truncated or malformed."""
+
+
+class PointCloudError(TpvpError, ValueError):
+    """A point cloud is empty, contains NaN/inf, or has implausible units."""
+
+
+class ConfigError(TpvpError, ValueError):
+    """An argument or configuration value is invalid."""
+
+
+class SensorError(TpvpError, ValueError):
+    """A view cannot be rendered (camera inside the geometry, zero-length look-at, ...)."""

@@ -1,0 +1,1052 @@
+"""Point-cloud reading and writing: PLY, PCD, text tables and meshes, to float64 (N, 3) metres.
+
+PLY and PCD are parsed by hand with numpy (a structured dtype built from the header and
+``np.frombuffer``) so that every malformed file gets a precise one-line error naming the file,
+instead of the silent empty cloud that open3d returns.
+
+Units rule (``units="auto"``, see :func:`detect_units`): a cloud whose largest bounding-box side
+exceeds 10 is taken as millimetres (no plant or greenhouse-row scan is 10 m long, while a plant
+scanned in millimetres spans tens to hundreds of units); otherwise it is metres, even when its
+coordinates reach |c| >= 10 (the reference simulator's mm switch), because a small extent far from
+the origin is a metric scan with an offset, not a plant under 1 cm tall. That ambiguous case is
+reported with a warning. After conversion a cloud larger than 100 m, or (for an explicit
+``units="mm"``) smaller than 1 mm, raises :class:`~tpvp.errors.PointCloudError`.
+"""
+
+from __future__ import annotations
+
+import io
+import logging
+import os
+import re
+import warnings
+from pathlib import Path
+from typing import NamedTuple
+
+import numpy as np
+
+from tpvp.errors import ConfigError, InputFileError, PointCloudError
+from tpvp.io.atomic import atomic_write_bytes
+
+__all__ = [
+    "read_point_cloud",
+    "write_point_cloud",
+    "read_text_table",
+    "detect_units",
+    "to_metres",
+    "READ_EXTENSIONS",
+    "WRITE_EXTENSIONS",
+]
+
+log = logging.getLogger(__name__)
+
+#: Largest bounding-box side (in file units) still taken as metres by ``units="auto"``.
+MM_EXTENT_THRESHOLD = 10.0
+#: The reference simulator's rule: any |coordinate| >= this means millimetres.
+REFERENCE_MM_COORD = 10.0
+#: Largest plausible side of a scan in metres (a greenhouse row is a few metres).
+MAX_EXTENT_M = 100.0
+#: Smallest plausible side in metres when the caller declares millimetres.
+MIN_EXTENT_M = 1e-3
+
+UNITS = ("auto", "m", "mm")
+#: Column/property names taken as per-point integer labels.
+LABEL_NAMES = ("label", "labels", "class", "classification", "scalar_label", "semantic",
+               "semantic_label", "category")
+
+TEXT_EXTENSIONS = (".xyz", ".txt", ".pts", ".csv")
+MESH_EXTENSIONS = (".obj", ".stl", ".off", ".glb")
+READ_EXTENSIONS = (".ply", ".pcd") + TEXT_EXTENSIONS + MESH_EXTENSIONS
+WRITE_EXTENSIONS = (".ply", ".pcd") + TEXT_EXTENSIONS
+
+
+# --------------------------------------------------------------------------------------------
+# units
+
+
+def _as_points(points, name: str = "points") -> np.ndarray:
+    try:
+        pts = np.asarray(points, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ConfigError(f"{name} must be a numeric (N, 3) array: {exc}") from None
+    if pts.ndim != 2 or pts.shape[1] != 3:
+        raise ConfigError(f"{name} must be an (N, 3) array, got shape {pts.shape}")
+    return pts
+
+
+def _who(source) -> str:
+    return f"{source}: " if source is not None else ""
+
+
+def _largest_side(pts: np.ndarray) -> float:
+    finite = pts[np.isfinite(pts).all(axis=1)]
+    if len(finite) == 0:
+        return 0.0
+    return float((finite.max(axis=0) - finite.min(axis=0)).max())
+
+
+def detect_units(points, source=None) -> str:
+    """Return ``"mm"`` if the largest bounding-box side exceeds 10, else ``"m"`` (see module doc)."""
+    pts = _as_points(points)
+    finite = pts[np.isfinite(pts).all(axis=1)]
+    if len(finite) == 0:
+        raise PointCloudError(f"{_who(source)}cannot detect units of a cloud with no finite points")
+    side = float((finite.max(axis=0) - finite.min(axis=0)).max())
+    if side > MM_EXTENT_THRESHOLD:
+        return "mm"
+    reach = float(np.abs(finite).max())
+    if reach >= REFERENCE_MM_COORD:
+        warnings.warn(
+            f"{_who(source)}coordinates reach |c| = {reach:.4g} but the cloud spans only {side:.4g}: "
+            f"taken as metres (offset from the origin); pass units='mm' if it is a tiny mm scan",
+            stacklevel=2,
+        )
+    return "m"
+
+
+def to_metres(points, units: str = "auto", source=None) -> np.ndarray:
+    """Return a new float64 (N, 3) array in metres; ``units`` is "auto", "m" or "mm".
+
+    Raises PointCloudError when the result is implausible for a plant or greenhouse row
+    (larger than 100 m, or under 1 mm for an explicit ``units="mm"``); ``source`` (a file name)
+    is put in the message.
+    """
+    if units not in UNITS:
+        raise ConfigError(f"units must be one of {UNITS}, got {units!r}")
+    pts = _as_points(points)
+    used = detect_units(pts, source) if units == "auto" else units
+    out = pts * (1e-3 if used == "mm" else 1.0)
+    side = _largest_side(out)
+    if side > MAX_EXTENT_M:
+        if units == "auto":
+            why = f"even after mm -> m conversion it spans {side:.0f} m (a {side:.0f} m plant?)"
+        elif units == "m":
+            why = (f"units='m' makes it a {side:.0f} m plant; it looks like millimetres "
+                   f"(use units='mm' or 'auto')")
+        else:
+            why = f"even in millimetres it spans {side:.0f} m (a {side:.0f} m plant?)"
+        raise PointCloudError(f"{_who(source)}wrong units? {why}")
+    if units == "mm" and 0.0 < side < MIN_EXTENT_M:
+        raise PointCloudError(
+            f"{_who(source)}wrong units? units='mm' shrinks the cloud to {side * 1e3:.3g} mm across; "
+            f"it looks like metres already (use units='m' or 'auto')"
+        )
+    return out
+
+
+# --------------------------------------------------------------------------------------------
+# shared helpers
+
+
+def _read_bytes(path: Path) -> bytes:
+    try:
+        data = path.read_bytes()
+    except FileNotFoundError:
+        raise InputFileError(f"{path}: file not found") from None
+    except IsADirectoryError:
+        raise InputFileError(f"{path}: is a directory, not a file") from None
+    except OSError as exc:
+        raise InputFileError(f"{path}: cannot read: {exc.strerror or exc}") from None
+    if not data:
+        raise InputFileError(f"{path}: empty file (0 bytes)")
+    return data
+
+
+def _check_file(path: Path) -> None:
+    if not path.exists():
+        raise InputFileError(f"{path}: file not found")
+    if not path.is_file():
+        raise InputFileError(f"{path}: is not a regular file")
+    if path.stat().st_size == 0:
+        raise InputFileError(f"{path}: empty file (0 bytes)")
+
+
+def _unique(names: list[str]) -> list[str]:
+    # Structured dtypes need unique field names; PCL pads with several "_" fields.
+    seen: set[str] = set()
+    out = []
+    for n in names:
+        key, i = n, 1
+        while key in seen:
+            key, i = f"{n}_{i}", i + 1
+        seen.add(key)
+        out.append(key)
+    return out
+
+
+def _label_index(names: list[str]) -> int | None:
+    low = [n.lower() for n in names]
+    return next((i for i, n in enumerate(low) if n in LABEL_NAMES), None)
+
+
+def _int_labels(path, values: np.ndarray, what: str) -> np.ndarray | None:
+    values = np.asarray(values)
+    if values.dtype.kind in "iu":
+        return values.astype(np.int64)
+    if np.isfinite(values).all() and np.array_equal(values, np.round(values)):
+        return values.astype(np.int64)
+    log.info("%s: %s is not integer-valued; not returned as labels", path, what)
+    return None
+
+
+# --------------------------------------------------------------------------------------------
+# text tables
+
+_NAME_RE = re.compile(r"^[A-Za-z_][\w.\-]*$")
+
+
+def _is_number(tok: str) -> bool:
+    try:
+        float(tok)
+    except ValueError:
+        return False
+    return True
+
+
+def _guess_delim(line: str) -> str | None:
+    if "," in line:
+        return ","
+    if ";" in line:
+        return ";"
+    return None  # any whitespace
+
+
+def _split(line: str, delim: str | None) -> list[str]:
+    return [t.strip() for t in line.split(delim)] if delim else line.split()
+
+
+def _next_data_line(text: str, pos: int, lineno: int):
+    """(stripped line, line number, start, next start) of the next non-blank, non-'#' line."""
+    while pos < len(text):
+        nl = text.find("\n", pos)
+        end = len(text) if nl < 0 else nl
+        nxt = len(text) if nl < 0 else nl + 1
+        lineno += 1
+        line = text[pos:end].split("#", 1)[0].strip()
+        if line:
+            return line, lineno, pos, nxt
+        pos = nxt
+    return None
+
+
+def _locate_text_error(path, body: str, delim, first_lineno: int, exc: Exception) -> str:
+    # Error path only: find the offending line so the message can name it.
+    expected = None
+    for n, raw in enumerate(body.splitlines(), start=first_lineno):
+        line = raw.split("#", 1)[0].strip()
+        if not line:
+            continue
+        toks = _split(line, delim)
+        for t in toks:
+            if not _is_number(t):
+                shown = repr(t) if t else "an empty field"
+                return f"{path}: line {n}: non-numeric value {shown}"
+        if expected is None:
+            expected = len(toks)
+        elif len(toks) != expected:
+            return f"{path}: line {n} has {len(toks)} columns, earlier lines have {expected}"
+    return f"{path}: cannot parse as a numeric table ({exc})"
+
+
+def _decode(path, data: bytes) -> str:
+    if b"\x00" in data[:4096]:
+        raise InputFileError(f"{path}: contains binary data, expected a text table")
+    try:
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError:
+        return data.decode("latin-1")  # numbers are ASCII; only comments can be affected
+
+
+def _parse_text_table(path, data: bytes, *, count_header="auto", allow_names=False):
+    """Parse a numeric text table. Returns (float64 array (N, C), column names or None)."""
+    text = _decode(path, data)
+    first = _next_data_line(text, 0, 0)
+    if first is None:
+        raise InputFileError(f"{path}: no data (the file is blank or only comments)")
+    line, ln, start, nxt = first
+    names = None
+    count = None
+    provisional = None  # a single integer before a 1-column table: count only if it matches
+    body_start, body_line = start, ln
+    is_names = line.startswith("//")  # CloudCompare writes "//X,Y,Z" headers
+    toks = _split(line.lstrip("/"), _guess_delim(line))
+    if is_names or not all(_is_number(t) for t in toks):
+        if allow_names and toks and all(_NAME_RE.match(t) for t in toks):
+            names = [t.lower() for t in toks]
+            body_start, body_line = nxt, ln + 1
+        else:
+            bad = next((t for t in toks if not _is_number(t)), line)
+            raise InputFileError(f"{path}: line {ln}: non-numeric value {bad!r}")
+    elif len(toks) == 1 and re.fullmatch(r"\+?\d+", toks[0]) and count_header is not False:
+        second = _next_data_line(text, nxt, ln)
+        multi = second is not None and len(_split(second[0], _guess_delim(second[0]))) >= 2
+        if count_header is True or multi:
+            count = int(toks[0])
+            body_start, body_line = nxt, ln + 1
+        elif second is not None:
+            provisional = int(toks[0])
+    elif count_header is True:
+        raise InputFileError(f"{path}: line {ln}: expected a row count, found {line[:40]!r}")
+
+    body = text[body_start:]
+    nxt_line = _next_data_line(body, 0, 0)
+    delim = _guess_delim(nxt_line[0]) if nxt_line else None
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)  # "input contained no data"
+        try:
+            arr = np.loadtxt(io.StringIO(body), dtype=np.float64, delimiter=delim, comments="#",
+                             ndmin=2)
+        except ValueError as exc:
+            raise InputFileError(_locate_text_error(path, body, delim, body_line, exc)) from None
+    if nxt_line is None:
+        arr = np.empty((0, len(names) if names else 0))
+    if provisional is not None and provisional == len(arr) - 1:
+        arr = arr[1:]
+    if count is not None and count != len(arr):
+        raise InputFileError(f"{path}: line {ln} declares {count} rows, the file holds {len(arr)}")
+    if names is not None and arr.shape[1] != len(names) and len(arr):
+        raise InputFileError(f"{path}: the header names {len(names)} columns, rows have {arr.shape[1]}")
+    return arr, names
+
+
+def read_text_table(path, columns: int | None = None, count_header="auto") -> np.ndarray:
+    """Read a whitespace- or comma-separated numeric table as float64 (N, C).
+
+    ``count_header``: "auto" treats a first line holding one integer as the row count when the
+    other rows have 2+ columns (or when it equals the number of rows of a 1-column table);
+    True requires it, False never uses it. A declared count must match. ``columns`` requires that
+    many columns. A file holding a single number returns shape (1, 1). '#' starts a comment.
+    """
+    if count_header not in ("auto", True, False):
+        raise ConfigError(f"count_header must be 'auto', True or False, got {count_header!r}")
+    if columns is not None and (not isinstance(columns, (int, np.integer)) or columns < 1):
+        raise ConfigError(f"columns must be a positive integer or None, got {columns!r}")
+    path = Path(path)
+    arr, _ = _parse_text_table(path, _read_bytes(path), count_header=count_header)
+    if columns is not None and len(arr) and arr.shape[1] != columns:
+        raise InputFileError(f"{path}: has {arr.shape[1]} columns, expected {columns}")
+    if columns is not None and not len(arr):
+        arr = np.empty((0, columns))
+    if not np.isfinite(arr).all():
+        row = int(np.flatnonzero(~np.isfinite(arr).all(axis=1))[0])
+        raise InputFileError(f"{path}: data row {row + 1} holds a NaN/inf value")
+    return arr
+
+
+def _read_text_cloud(path: Path, return_labels: bool):
+    arr, names = _parse_text_table(path, _read_bytes(path), count_header="auto", allow_names=True)
+    if len(arr) == 0:
+        raise PointCloudError(f"{path}: holds no points")
+    ncol = arr.shape[1]
+    if ncol < 3:
+        raise InputFileError(f"{path}: {ncol} column(s) per line; a point cloud needs 3 (x y z)")
+    xyz = [0, 1, 2]
+    label_col = 3 if ncol >= 4 else None
+    if names is not None:
+        if all(c in names for c in "xyz"):
+            xyz = [names.index(c) for c in "xyz"]
+        label_col = _label_index(names)
+    labels = None
+    if label_col is not None:
+        labels = _int_labels(path, arr[:, label_col], f"column {label_col + 1}")
+        if labels is None:
+            label_col = None
+    ignored = [i + 1 for i in range(ncol) if i not in xyz and i != label_col]
+    used = f"x y z from columns {', '.join(str(i + 1) for i in xyz)}"
+    if label_col is not None:
+        used += f", labels from column {label_col + 1}"
+    if ignored:
+        warnings.warn(f"{path}: {ncol} columns per line; read {used}; ignored column(s) "
+                      f"{', '.join(map(str, ignored))}", stacklevel=3)
+    elif label_col is not None and not return_labels:
+        log.info("%s: read %s (labels not requested)", path, used)
+    return arr[:, xyz], labels
+
+
+# --------------------------------------------------------------------------------------------
+# PLY
+
+_PLY_TYPES = {
+    "char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1",
+    "short": "i2", "int16": "i2", "ushort": "u2", "uint16": "u2",
+    "int": "i4", "int32": "i4", "uint": "u4", "uint32": "u4",
+    "float": "f4", "float32": "f4", "double": "f8", "float64": "f8",
+}
+_PLY_FORMATS = ("ascii", "binary_little_endian", "binary_big_endian")
+
+
+class _Prop(NamedTuple):
+    name: str
+    type: str  # numpy code of the scalar or of the list items
+    count_type: str | None  # numpy code of the list length, None for scalars
+
+
+class _Element(NamedTuple):
+    name: str
+    count: int
+    props: list
+
+
+def _ply_type(path, word: str, lineno: int) -> str:
+    try:
+        return _PLY_TYPES[word]
+    except KeyError:
+        raise InputFileError(
+            f"{path}: line {lineno}: unknown PLY property type {word!r} "
+            f"(known: {', '.join(sorted(set(_PLY_TYPES)))})") from None
+
+
+def _parse_ply_header(path, data: bytes):
+    """Return (format, elements, payload offset, header line count)."""
+    if not data.startswith(b"ply"):
+        raise InputFileError(f"{path}: not a PLY file (does not start with 'ply')")
+    pos, lineno, fmt, elements = 0, 0, None, []
+    while True:
+        nl = data.find(b"\n", pos)
+        end = len(data) if nl < 0 else nl
+        nxt = len(data) if nl < 0 else nl + 1
+        lineno += 1
+        try:
+            line = data[pos:end].decode("ascii").strip()
+        except UnicodeDecodeError:
+            line = None
+        if line == "end_header":
+            break
+        if line is None or (nl < 0 and not line):
+            raise InputFileError(f"{path}: PLY header has no 'end_header' line")
+        words = line.split()
+        key = words[0] if words else ""
+        bad = False
+        if not words:
+            pass  # tolerate blank header lines
+        elif lineno == 1:
+            bad = line != "ply"
+        elif key in ("comment", "obj_info"):
+            pass
+        elif key == "format":
+            if len(words) != 3 or words[1] not in _PLY_FORMATS:
+                raise InputFileError(f"{path}: line {lineno}: unknown PLY format {line!r} "
+                                     f"(known: {', '.join(_PLY_FORMATS)})")
+            fmt = words[1]
+        elif key == "element":
+            if len(words) != 3 or not words[2].isdigit():
+                raise InputFileError(f"{path}: line {lineno}: malformed element line {line!r}")
+            elements.append(_Element(words[1], int(words[2]), []))
+        elif key == "property":
+            if not elements:
+                raise InputFileError(f"{path}: line {lineno}: property before any element")
+            if len(words) == 5 and words[1] == "list":
+                prop = _Prop(words[4], _ply_type(path, words[3], lineno),
+                             _ply_type(path, words[2], lineno))
+                if prop.count_type[0] == "f":
+                    raise InputFileError(f"{path}: line {lineno}: list length type must be an integer")
+            elif len(words) == 3:
+                prop = _Prop(words[2], _ply_type(path, words[1], lineno), None)
+            else:
+                raise InputFileError(f"{path}: line {lineno}: malformed property line {line!r}")
+            elements[-1].props.append(prop)
+        else:
+            bad = True
+        if bad:
+            raise InputFileError(
+                f"{path}: PLY header line {lineno} is not a header line ({line[:40]!r}); "
+                f"is 'end_header' missing?")
+        if nl < 0:
+            raise InputFileError(f"{path}: PLY header has no 'end_header' line")
+        pos = nxt
+    if fmt is None:
+        raise InputFileError(f"{path}: PLY header has no 'format' line")
+    return fmt, elements, nxt, lineno
+
+
+def _ply_first_row_counts(data: bytes, offset: int, elem: _Element, endian: str):
+    counts, off = [], offset
+    for p in elem.props:
+        if p.count_type is None:
+            off += np.dtype(p.type).itemsize
+            continue
+        cdt = np.dtype(endian + p.count_type)
+        if off + cdt.itemsize > len(data):
+            return None
+        k = int(np.frombuffer(data, cdt, 1, off)[0])
+        counts.append(max(k, 0))
+        off += cdt.itemsize + max(k, 0) * np.dtype(p.type).itemsize
+    return counts
+
+
+def _ply_row_dtype(elem: _Element, endian: str, counts=()) -> np.dtype:
+    fields, it = [], iter(counts)
+    for i, (p, name) in enumerate(zip(elem.props, _unique([p.name for p in elem.props]))):
+        if p.count_type is None:
+            fields.append((name, endian + p.type))
+        else:
+            fields.append((f"__count{i}", endian + p.count_type))
+            k = next(it)
+            if k:
+                fields.append((name, endian + p.type, (k,)))
+    return np.dtype(fields)
+
+
+def _ply_walk(path, data: bytes, offset: int, elem: _Element, endian: str) -> int:
+    # Variable-length lists (e.g. mixed triangles and quads) before the vertices need a
+    # row-by-row walk to find where the vertices start; rare, so a plain loop is acceptable.
+    byteorder = "little" if endian == "<" else "big"
+    plan = [(np.dtype(p.type).itemsize,
+             None if p.count_type is None else np.dtype(p.count_type)) for p in elem.props]
+    off, n = offset, len(data)
+    for row in range(elem.count):
+        for size, cdt in plan:
+            if cdt is None:
+                off += size
+            else:
+                k = int.from_bytes(data[off:off + cdt.itemsize], byteorder, signed=cdt.kind == "i")
+                off += cdt.itemsize + max(k, 0) * size
+        if off > n:
+            raise InputFileError(
+                f"{path}: truncated: header declares {elem.count} '{elem.name}' rows before "
+                f"the vertices, file ends inside row {row + 1}")
+    return off
+
+
+def _ply_binary_block(path, data: bytes, offset: int, elem: _Element, endian: str, is_vertex: bool):
+    """Return (structured array or None, offset after the element)."""
+    nlists = sum(1 for p in elem.props if p.count_type)
+    counts = _ply_first_row_counts(data, offset, elem, endian) if (nlists and elem.count) else None
+    if counts is None:
+        counts = [0] * nlists
+    dt = _ply_row_dtype(elem, endian, counts)
+    avail = len(data) - offset
+    fits = avail >= elem.count * dt.itemsize
+    if fits:
+        arr = np.frombuffer(data, dt, elem.count, offset)
+        uniform = all((arr[f"__count{i}"] == k).all() for i, k in
+                      zip([i for i, p in enumerate(elem.props) if p.count_type], counts))
+        if uniform:
+            return arr, offset + elem.count * dt.itemsize
+    if not is_vertex:
+        return None, _ply_walk(path, data, offset, elem, endian)
+    if not fits:
+        holds = avail // dt.itemsize if dt.itemsize else 0
+        raise InputFileError(
+            f"{path}: truncated: header declares {elem.count} vertices, file holds {holds}")
+    raise InputFileError(f"{path}: vertex list properties of varying length are not supported")
+
+
+def _ply_vertex_columns(path, elem: _Element):
+    names = [p.name for p in elem.props]
+    low = [n.lower() for n in names]
+    idx = []
+    for c in "xyz":
+        if c in names:
+            idx.append(names.index(c))
+        elif c in low:
+            idx.append(low.index(c))
+        else:
+            raise InputFileError(f"{path}: the vertex element has no '{c}' property "
+                                 f"(properties: {' '.join(names) or 'none'})")
+    for i in idx:
+        if elem.props[i].count_type is not None:
+            raise InputFileError(f"{path}: vertex property '{names[i]}' is a list, expected a scalar")
+    lab = _label_index(names)
+    if lab is not None and elem.props[lab].count_type is not None:
+        lab = None
+    return idx, lab
+
+
+def _as_declared(cols: np.ndarray, codes: list[str]) -> np.ndarray:
+    """Round text values to the declared float type, so ASCII and binary files read alike."""
+    out = np.array(cols, dtype=np.float64)
+    for j, code in enumerate(codes):
+        if code in ("f2", "f4"):
+            out[:, j] = out[:, j].astype(code)
+    return out
+
+
+def _ply_ascii_vertices(path, data, offset, header_lines, elements, vi, idx, lab):
+    buf = np.frombuffer(data, np.uint8, offset=offset)
+    nl = np.flatnonzero(buf == 10)
+    tail_start = nl[-1] + 1 if len(nl) else 0
+    total = len(nl) + (1 if bytes(buf[tail_start:]).strip() else 0)
+    skip = sum(e.count for e in elements[:vi])  # ASCII PLY: one line per element row
+    elem = elements[vi]
+    if total < skip + elem.count:
+        raise InputFileError(f"{path}: truncated: header declares {elem.count} vertices, "
+                             f"file holds {max(total - skip, 0)}")
+    start = nl[skip - 1] + 1 if skip else 0
+    last = skip + elem.count - 1
+    end = nl[last] if last < len(nl) else len(buf)
+    block = bytes(buf[start:end]).decode("latin-1")
+    first_line = header_lines + skip + 1
+    try:
+        arr = np.loadtxt(io.StringIO(block), dtype=np.float64, comments=None, ndmin=2)
+    except ValueError as exc:
+        msg = _locate_text_error(path, block, None, first_line, exc)
+        if any(p.count_type for p in elem.props):
+            msg += " (vertex list properties of varying length are not supported)"
+        raise InputFileError(msg) from None
+    if len(arr) != elem.count:
+        raise InputFileError(f"{path}: expected {elem.count} vertex lines from line {first_line}, "
+                             f"found {len(arr)} (blank lines inside the data?)")
+    # Column of each property; lists take 1 + length columns, equal in every row.
+    col, cols = 0, []
+    for p in elem.props:
+        cols.append(col)
+        if p.count_type is None:
+            col += 1
+            continue
+        if col >= arr.shape[1]:
+            break
+        k = arr[0, col]
+        if not (arr[:, col] == k).all() or k < 0 or k != int(k):
+            raise InputFileError(f"{path}: vertex list '{p.name}' has varying lengths; not supported")
+        col += 1 + int(k)
+    if col != arr.shape[1]:
+        raise InputFileError(f"{path}: vertex lines hold {arr.shape[1]} values, "
+                             f"the header declares {col}")
+    pts = _as_declared(arr[:, [cols[i] for i in idx]], [elem.props[i].type for i in idx])
+    labels = _int_labels(path, arr[:, cols[lab]], "the label property") if lab is not None else None
+    return pts, labels
+
+
+def _read_ply(path: Path, return_labels: bool):
+    data = _read_bytes(path)
+    fmt, elements, offset, header_lines = _parse_ply_header(path, data)
+    vi = next((i for i, e in enumerate(elements) if e.name == "vertex"), None)
+    if vi is None:
+        raise InputFileError(f"{path}: the PLY has no 'vertex' element")
+    vertex = elements[vi]
+    idx, lab = _ply_vertex_columns(path, vertex)
+    if vertex.count == 0:
+        raise PointCloudError(f"{path}: holds no points (element vertex 0)")
+    if fmt == "ascii":
+        return _ply_ascii_vertices(path, data, offset, header_lines, elements, vi, idx, lab)
+    endian = "<" if fmt == "binary_little_endian" else ">"
+    for elem in elements[:vi]:
+        _, offset = _ply_binary_block(path, data, offset, elem, endian, is_vertex=False)
+    arr, _ = _ply_binary_block(path, data, offset, vertex, endian, is_vertex=True)
+    names = _unique([p.name for p in vertex.props])
+    pts = np.empty((vertex.count, 3), dtype=np.float64)
+    for j, i in enumerate(idx):
+        pts[:, j] = arr[names[i]]
+    labels = None
+    if lab is not None and return_labels:
+        labels = _int_labels(path, arr[names[lab]], "the label property")
+    return pts, labels
+
+
+# --------------------------------------------------------------------------------------------
+# PCD
+
+_PCD_TYPES = {("F", 2): "f2", ("F", 4): "f4", ("F", 8): "f8",
+              ("I", 1): "i1", ("I", 2): "i2", ("I", 4): "i4", ("I", 8): "i8",
+              ("U", 1): "u1", ("U", 2): "u2", ("U", 4): "u4", ("U", 8): "u8"}
+_PCD_KEYS = ("VERSION", "FIELDS", "COLUMNS", "SIZE", "TYPE", "COUNT", "WIDTH", "HEIGHT",
+             "VIEWPOINT", "POINTS", "DATA")
+
+
+def _parse_pcd_header(path, data: bytes):
+    pos, lineno, hdr = 0, 0, {}
+    while True:
+        if pos >= len(data):
+            raise InputFileError(f"{path}: PCD header has no DATA line")
+        nl = data.find(b"\n", pos)
+        end = len(data) if nl < 0 else nl
+        nxt = len(data) if nl < 0 else nl + 1
+        lineno += 1
+        try:
+            line = data[pos:end].decode("ascii").strip()
+        except UnicodeDecodeError:
+            raise InputFileError(f"{path}: PCD header has no DATA line (binary data at line "
+                                 f"{lineno})") from None
+        pos = nxt
+        if not line or line.startswith("#"):
+            continue
+        words = line.split()
+        key = words[0].upper()
+        if key not in _PCD_KEYS:
+            raise InputFileError(f"{path}: PCD header line {lineno} is not a header line "
+                                 f"({line[:40]!r}); is the DATA line missing?")
+        hdr[key] = words[1:]
+        if key == "DATA":
+            return hdr, pos, lineno
+
+
+def _pcd_ints(path, hdr, key, n=None):
+    vals = hdr.get(key)
+    if vals is None:
+        return None
+    if not all(re.fullmatch(r"\d+", v) for v in vals) or (n is not None and len(vals) != n):
+        raise InputFileError(f"{path}: malformed PCD {key} line: {' '.join(vals)!r}")
+    return [int(v) for v in vals]
+
+
+def _pcd_fields(path, hdr):
+    names = hdr.get("FIELDS") or hdr.get("COLUMNS")
+    if not names:
+        raise InputFileError(f"{path}: PCD header has no FIELDS line")
+    n = len(names)
+    for key in ("SIZE", "TYPE"):
+        if key not in hdr:
+            raise InputFileError(f"{path}: PCD header has no {key} line")
+    sizes = _pcd_ints(path, hdr, "SIZE", n)
+    counts = _pcd_ints(path, hdr, "COUNT", n) or [1] * n
+    types = [t.upper() for t in hdr["TYPE"]]
+    if len(types) != n:
+        raise InputFileError(f"{path}: PCD TYPE lists {len(types)} entries for {n} FIELDS")
+    codes = []
+    for name, t, s in zip(names, types, sizes):
+        code = _PCD_TYPES.get((t, s))
+        if code is None:
+            raise InputFileError(f"{path}: unknown PCD type/size '{t} {s}' for field '{name}'")
+        codes.append(code)
+    return list(names), _unique(list(names)), codes, counts
+
+
+def _lzf_kernel(src, out):
+    """LZF decompression (the liblzf format PCL uses). Returns bytes written, -1 if corrupt."""
+    ip, op = 0, 0
+    n, m = src.shape[0], out.shape[0]
+    while ip < n:
+        ctrl = np.int64(src[ip])
+        ip += 1
+        if ctrl < 32:  # literal run of ctrl + 1 bytes
+            length = ctrl + 1
+            if ip + length > n or op + length > m:
+                return -1
+            for k in range(length):
+                out[op + k] = src[ip + k]
+            ip += length
+            op += length
+        else:  # back reference; may overlap the bytes being written, so copy bytewise
+            length = ctrl >> 5
+            if length == 7:
+                if ip >= n:
+                    return -1
+                length += np.int64(src[ip])
+                ip += 1
+            if ip >= n:
+                return -1
+            ref = op - ((ctrl & 31) << 8) - 1 - np.int64(src[ip])
+            ip += 1
+            length += 2
+            if ref < 0 or op + length > m:
+                return -1
+            for k in range(length):
+                out[op + k] = out[ref + k]
+            op += length
+    return op
+
+
+_lzf_impl = None
+
+
+def _lzf_decompress(payload: bytes, size: int) -> np.ndarray | None:
+    global _lzf_impl
+    if _lzf_impl is None:
+        try:  # imported lazily: numba costs ~1 s and only compressed PCDs need it
+            import numba
+
+            _lzf_impl = numba.njit(cache=True, nogil=True)(_lzf_kernel)
+        except Exception:  # pragma: no cover - numba missing or unusable
+            _lzf_impl = _lzf_kernel
+    out = np.empty(size, dtype=np.uint8)
+    written = _lzf_impl(np.frombuffer(payload, dtype=np.uint8), out)
+    return out if written == size else None
+
+
+def _read_pcd(path: Path, return_labels: bool):
+    data = _read_bytes(path)
+    hdr, offset, header_lines = _parse_pcd_header(path, data)
+    names, keys, codes, counts = _pcd_fields(path, hdr)
+    width = _pcd_ints(path, hdr, "WIDTH", 1)
+    height = _pcd_ints(path, hdr, "HEIGHT", 1)
+    points = _pcd_ints(path, hdr, "POINTS", 1)
+    if points is None and width is None:
+        raise InputFileError(f"{path}: PCD header has neither POINTS nor WIDTH")
+    n = points[0] if points else width[0] * (height[0] if height else 1)
+    if width and height and width[0] * height[0] != n:
+        raise InputFileError(f"{path}: PCD WIDTH x HEIGHT = {width[0]} x {height[0]} "
+                             f"does not match POINTS {n}")
+    mode = (hdr["DATA"] or [""])[0].lower()
+    if mode not in ("ascii", "binary", "binary_compressed"):
+        raise InputFileError(f"{path}: unknown PCD DATA mode {mode!r} "
+                             f"(known: ascii, binary, binary_compressed)")
+    idx = []
+    for c in "xyz":
+        if c not in names:
+            raise InputFileError(f"{path}: the PCD has no '{c}' field (fields: {' '.join(names)})")
+        idx.append(names.index(c))
+        if counts[idx[-1]] != 1:
+            raise InputFileError(f"{path}: PCD field '{c}' has COUNT {counts[idx[-1]]}, expected 1")
+    lab = _label_index(names)
+    if lab is not None and counts[lab] != 1:
+        lab = None
+    if n == 0:
+        raise PointCloudError(f"{path}: holds no points (POINTS 0)")
+
+    cols: list[np.ndarray] = [None] * len(names)  # only x, y, z and the label are filled
+    wanted = idx + ([lab] if lab is not None and return_labels else [])
+    if mode == "ascii":
+        block = data[offset:].decode("latin-1")
+        try:
+            arr = np.loadtxt(io.StringIO(block), dtype=np.float64, comments="#", ndmin=2)
+        except ValueError as exc:
+            raise InputFileError(_locate_text_error(path, block, None, header_lines + 1, exc)) from None
+        width_total = sum(counts)
+        if len(arr) < n:
+            raise InputFileError(f"{path}: truncated: header declares {n} points, file holds {len(arr)}")
+        if len(arr) > n:
+            raise InputFileError(f"{path}: header declares {n} points, file holds {len(arr)} rows")
+        if arr.shape[1] != width_total:
+            raise InputFileError(f"{path}: rows hold {arr.shape[1]} values, the header declares "
+                                 f"{width_total}")
+        starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+        for i in wanted:
+            cols[i] = _as_declared(arr[:, starts[i]][:, None], [codes[i]])[:, 0]
+    elif mode == "binary":
+        dt = np.dtype([(k, "<" + c) if cnt == 1 else (k, "<" + c, (cnt,))
+                       for k, c, cnt in zip(keys, codes, counts)])
+        avail = len(data) - offset
+        if avail < n * dt.itemsize:
+            raise InputFileError(f"{path}: truncated: header declares {n} points, "
+                                 f"file holds {avail // dt.itemsize}")
+        arr = np.frombuffer(data, dt, n, offset)
+        for i in wanted:
+            cols[i] = arr[keys[i]]
+    else:
+        if len(data) < offset + 8:
+            raise InputFileError(f"{path}: truncated: the compressed block header is missing")
+        csize, usize = (int(v) for v in np.frombuffer(data, "<u4", 2, offset))
+        payload = data[offset + 8: offset + 8 + csize]
+        if len(payload) < csize:
+            raise InputFileError(f"{path}: truncated: compressed block declares {csize} bytes, "
+                                 f"file holds {len(payload)}")
+        sizes = [np.dtype(c).itemsize * cnt for c, cnt in zip(codes, counts)]
+        if usize != n * sum(sizes):
+            raise InputFileError(f"{path}: compressed block unpacks to {usize} bytes, "
+                                 f"{n} points need {n * sum(sizes)}")
+        raw = _lzf_decompress(payload, usize)
+        if raw is None:
+            raise InputFileError(f"{path}: corrupt LZF data in the binary_compressed block")
+        # Compressed PCD stores each field contiguously (all x, then all y, ...).
+        starts = np.concatenate([[0], np.cumsum(sizes)[:-1]]) * n
+        for i in wanted:
+            cols[i] = np.frombuffer(raw, "<" + codes[i], n, int(starts[i]))
+    pts = np.column_stack([cols[i] for i in idx]).astype(np.float64, copy=False)
+    labels = None
+    if lab is not None and return_labels:
+        labels = _int_labels(path, cols[lab], "the label field")
+    return pts, labels
+
+
+# --------------------------------------------------------------------------------------------
+# meshes
+
+
+def _read_mesh(path: Path, mesh_samples: int, seed: int):
+    import trimesh  # imported lazily: only meshes need it
+
+    _check_file(path)
+    try:
+        mesh = trimesh.load(str(path), force="mesh", process=False)
+    except Exception as exc:  # trimesh raises many unrelated types on bad files
+        reason = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
+        raise InputFileError(f"{path}: cannot read mesh: {reason}") from None
+    vertices = np.asarray(getattr(mesh, "vertices", np.empty((0, 3))), dtype=np.float64)
+    faces = np.asarray(getattr(mesh, "faces", np.empty((0, 3))))
+    if len(faces) == 0:
+        if len(vertices) == 0:
+            raise PointCloudError(f"{path}: the mesh holds no geometry")
+        log.info("%s: mesh has no faces; returning its %d vertices", path, len(vertices))
+        return vertices, None
+    if not np.isfinite(vertices).all():
+        raise PointCloudError(f"{path}: mesh vertices contain NaN/inf")
+    if not mesh.area > 0:
+        raise PointCloudError(f"{path}: the mesh has zero surface area; cannot sample it")
+    pts, _ = trimesh.sample.sample_surface(mesh, int(mesh_samples), seed=seed)
+    return np.asarray(pts, dtype=np.float64), None
+
+
+# --------------------------------------------------------------------------------------------
+# public reader
+
+
+def _drop_nonfinite(path, pts, labels, drop_invalid):
+    bad = ~np.isfinite(pts).all(axis=1)
+    nbad = int(bad.sum())
+    if not nbad:
+        return pts, labels
+    if not drop_invalid:
+        first = int(np.flatnonzero(bad)[0])
+        raise PointCloudError(f"{path}: {nbad} of {len(pts)} points have NaN/inf coordinates "
+                              f"(first: point {first + 1}); pass drop_invalid=True to drop them")
+    warnings.warn(f"{path}: dropped {nbad} of {len(pts)} points with NaN/inf coordinates",
+                  stacklevel=3)
+    keep = ~bad
+    return pts[keep], (labels[keep] if labels is not None else None)
+
+
+def read_point_cloud(path, units: str = "auto", return_labels: bool = False, *,
+                     drop_invalid: bool = False, mesh_samples: int = 100_000, seed: int = 0):
+    """Read a point cloud as float64 (N, 3) metres (``(points, labels or None)`` with
+    ``return_labels``).
+
+    Formats by extension (case-insensitive): .ply (ascii / binary LE / binary BE), .pcd (ascii,
+    binary, binary_compressed), .xyz .txt .pts .csv (3+ columns: x y z, then an optional integer
+    label), and meshes .obj .stl .off .glb, surface-sampled with ``mesh_samples`` points
+    (deterministic for a given ``seed``). ``units``: "auto", "m" or "mm" (see module doc).
+    NaN/inf points raise PointCloudError unless ``drop_invalid`` is True.
+    """
+    if not isinstance(path, (str, os.PathLike)):
+        raise ConfigError(f"path must be a file path, got {type(path).__name__}")
+    if units not in UNITS:
+        raise ConfigError(f"units must be one of {UNITS}, got {units!r}")
+    if not isinstance(mesh_samples, (int, np.integer)) or isinstance(mesh_samples, bool) \
+            or mesh_samples < 1:
+        raise ConfigError(f"mesh_samples must be a positive integer, got {mesh_samples!r}")
+    path = Path(path)
+    if not path.exists():
+        raise InputFileError(f"{path}: file not found")
+    ext = path.suffix.lower()
+    if ext == ".ply":
+        pts, labels = _read_ply(path, return_labels)
+    elif ext == ".pcd":
+        pts, labels = _read_pcd(path, return_labels)
+    elif ext in TEXT_EXTENSIONS:
+        pts, labels = _read_text_cloud(path, return_labels)
+    elif ext in MESH_EXTENSIONS:
+        pts, labels = _read_mesh(path, mesh_samples, seed)
+    else:
+        raise InputFileError(f"{path}: unknown point-cloud extension {ext or '(none)'!r} "
+                             f"(supported: {' '.join(READ_EXTENSIONS)})")
+    pts, labels = _drop_nonfinite(path, pts, labels, drop_invalid)
+    if len(pts) == 0:
+        raise PointCloudError(f"{path}: holds no points")
+    pts = to_metres(pts, units, source=path)
+    if return_labels:
+        return pts, labels
+    return pts
+
+
+# --------------------------------------------------------------------------------------------
+# writer
+
+
+def write_point_cloud(path, points, labels=None, binary: bool = True, *, dtype=None) -> Path:
+    """Write points (and optional integer labels) atomically; returns the path.
+
+    By extension: .ply (binary little-endian, or ascii with ``binary=False``), .pcd (binary or
+    ascii), .xyz/.txt/.pts/.csv text (``x y z [label]``; .csv comma-separated; .pts starts with
+    the point count). ``dtype`` is "float64" or "float32"; the default (None) is float64
+    (lossless) except for PCD, which gets float32 because PCL tools expect it and open3d 0.20
+    reads binary ``F 8`` fields as zeros. Parent directories are created.
+    """
+    if not isinstance(path, (str, os.PathLike)):
+        raise ConfigError(f"path must be a file path, got {type(path).__name__}")
+    path = Path(path)
+    ext = path.suffix.lower()
+    if ext not in WRITE_EXTENSIONS:
+        raise ConfigError(f"{path}: cannot write extension {ext or '(none)'!r} "
+                          f"(supported: {' '.join(WRITE_EXTENSIONS)})")
+    if dtype is None:
+        dtype = "float32" if ext == ".pcd" else "float64"
+    try:
+        dt = np.dtype(dtype)
+    except TypeError:
+        dt = None
+    if dt not in (np.dtype("f4"), np.dtype("f8")):
+        raise ConfigError(f"dtype must be float32 or float64, got {dtype!r}")
+    pts = _as_points(points)
+    if len(pts) == 0:
+        raise PointCloudError(f"cannot write {path}: points is empty")
+    if not np.isfinite(pts).all():
+        nbad = int((~np.isfinite(pts).all(axis=1)).sum())
+        raise PointCloudError(f"cannot write {path}: {nbad} points have NaN/inf coordinates")
+    if labels is not None:
+        lab = np.asarray(labels)
+        if lab.shape != (len(pts),):
+            raise ConfigError(f"labels must have shape ({len(pts)},), got {lab.shape}")
+        if lab.dtype.kind not in "iu" and not (
+                lab.dtype.kind in "fb" and np.isfinite(lab).all()
+                and np.array_equal(lab, np.round(lab))):
+            raise ConfigError("labels must be integers")
+        lab = lab.astype(np.int64)
+        if lab.size and (lab.min() < np.iinfo(np.int32).min or lab.max() > np.iinfo(np.int32).max):
+            raise ConfigError("labels must fit in 32-bit integers")
+        labels = lab
+    pts = pts.astype(dt)
+    n = len(pts)
+    fmt = "%.9g" if dt == np.float32 else "%.17g"
+
+    if ext == ".ply":
+        ptype = "float" if dt == np.float32 else "double"
+        header = [
+            "ply",
+            f"format {'binary_little_endian' if binary else 'ascii'} 1.0",
+            "comment written by tpvp",
+            f"element vertex {n}",
+            *(f"property {ptype} {c}" for c in "xyz"),
+            *(["property int label"] if labels is not None else []),
+            "end_header",
+        ]
+        head = ("\n".join(header) + "\n").encode("ascii")
+        if binary:
+            body = _packed(pts, labels, "<", "i4")
+        else:
+            body = _text_body(pts, labels, fmt, " ")
+        atomic_write_bytes(path, head + body)
+    elif ext == ".pcd":
+        size = dt.itemsize
+        fields, sizes, types = "x y z", [size] * 3, ["F"] * 3
+        if labels is not None:
+            fields += " label"
+            sizes.append(4)
+            # PCL's label is unsigned; negative labels (e.g. -1 = unlabelled) need a signed type.
+            types.append("U" if labels.min() >= 0 else "I")
+        k = len(sizes)
+        header = [
+            "# .PCD v0.7 - Point Cloud Data file format",
+            "VERSION 0.7",
+            f"FIELDS {fields}",
+            f"SIZE {' '.join(map(str, sizes))}",
+            f"TYPE {' '.join(types)}",
+            f"COUNT {' '.join(['1'] * k)}",
+            f"WIDTH {n}",
+            "HEIGHT 1",
+            "VIEWPOINT 0 0 0 1 0 0 0",
+            f"POINTS {n}",
+            f"DATA {'binary' if binary else 'ascii'}",
+        ]
+        head = ("\n".join(header) + "\n").encode("ascii")
+        if binary:
+            body = _packed(pts, labels, "<", "u4" if types[-1] == "U" else "i4")
+        else:
+            body = _text_body(pts, labels, fmt, " ")
+        atomic_write_bytes(path, head + body)
+    else:
+        delim = "," if ext == ".csv" else " "
+        head = f"{n}\n".encode() if ext == ".pts" else b""
+        atomic_write_bytes(path, head + _text_body(pts, labels, fmt, delim))
+    return path
+
+
+def _packed(pts: np.ndarray, labels, endian: str, label_code: str) -> bytes:
+    fields = [(c, endian + pts.dtype.str[1:]) for c in "xyz"]
+    if labels is not None:
+        fields.append(("label", endian + label_code))
+    rec = np.empty(len(pts), dtype=fields)
+    for j, c in enumerate("xyz"):
+        rec[c] = pts[:, j]
+    if labels is not None:
+        rec["label"] = labels
+    return rec.tobytes()
+
+
+def _text_body(pts: np.ndarray, labels, fmt: str, delim: str) -> bytes:
+    buf = io.StringIO()
+    if labels is None:
+        np.savetxt(buf, pts, fmt=fmt, delimiter=delim)
+    else:
+        table = np.column_stack([pts.astype(np.float64), labels.astype(np.float64)])
+        np.savetxt(buf, table, fmt=[fmt] * 3 + ["%d"], delimiter=delim)
+    return buf.getvalue().encode("ascii")

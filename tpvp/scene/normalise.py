@@ -1,0 +1,102 @@
+"""Single-plant scene set-up (SPEC.md "Single plant").
+
+Order matters: scale by the largest bounding-box side of the *unrotated* plant, rotate about +Z,
+then centre on the rotated plant's bounding box (scaling after rotating would change the 45-degree
+plant's size, and its oracle, by about 30%).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from tpvp.errors import ConfigError, PointCloudError
+from tpvp.scene import voxels
+
+
+@dataclass(frozen=True)
+class PlantScene:
+    """A normalised plant ready for the simulator (all in metres, plant centre at the origin)."""
+
+    points: np.ndarray  # (N, 3) plant points after scaling, rotation and centring
+    scale: float  # factor applied to the input coordinates
+    rotation_deg: float
+    offset: np.ndarray  # subtracted after scaling and rotating: p' = R (s p) - offset
+    table_points: np.ndarray  # (M, 3) supporting-table voxel centres (empty without a table)
+
+    @property
+    def centre(self) -> np.ndarray:
+        return np.zeros(3)
+
+    def transform(self, points: np.ndarray) -> np.ndarray:
+        """Apply the same scale, rotation and centring to another cloud (e.g. the other session)."""
+        return _rotate_z(np.asarray(points, dtype=np.float64) * self.scale, self.rotation_deg) - self.offset
+
+
+def _rotate_z(points: np.ndarray, degrees: float) -> np.ndarray:
+    a = np.deg2rad(degrees)
+    c, s = np.cos(a), np.sin(a)
+    rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    return points @ rot.T
+
+
+def rotate_z(points: np.ndarray, degrees: float) -> np.ndarray:
+    """Rotate points about the +Z axis through the origin."""
+    return _rotate_z(np.asarray(points, dtype=np.float64).reshape(-1, 3), degrees)
+
+
+def _check_cloud(points: np.ndarray, name: str) -> np.ndarray:
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    if len(points) == 0:
+        raise PointCloudError(f"{name} is empty")
+    if not np.all(np.isfinite(points)):
+        raise PointCloudError(f"{name} contains NaN or infinite coordinates")
+    return points
+
+
+def normalise_plant(points, largest_side: float = 0.24, rotation_deg: float = 0.0,
+                    centre: str = "bbox", table: bool = False, table_size: float = 0.4,
+                    table_resolution: float = 0.002, reference_points=None) -> PlantScene:
+    """Scale, rotate and centre a plant; optionally add the supporting table of the hemisphere setup.
+
+    ``reference_points`` (e.g. the current session) defines scale and centre instead of ``points``,
+    so that two sessions of one plant stay in one frame. ``centre`` is ``"bbox"`` (paper) or
+    ``"centroid"`` (the authors' code).
+    """
+    points = _check_cloud(points, "plant cloud")
+    ref = points if reference_points is None else _check_cloud(reference_points, "reference cloud")
+    if not (largest_side > 0):
+        raise ConfigError(f"largest_side must be > 0 m, got {largest_side!r}")
+    if centre not in ("bbox", "centroid"):
+        raise ConfigError(f"centre must be 'bbox' or 'centroid', got {centre!r}")
+    extent = np.ptp(ref, axis=0).max()
+    if extent <= 0:
+        raise PointCloudError("plant cloud has zero extent (all points coincide)")
+    scale = largest_side / extent
+    rotated = _rotate_z(ref * scale, rotation_deg)
+    if centre == "bbox":
+        offset = 0.5 * (rotated.min(axis=0) + rotated.max(axis=0))
+    else:
+        offset = rotated.mean(axis=0)
+    plant = _rotate_z(points * scale, rotation_deg) - offset
+    table_points = np.zeros((0, 3))
+    if table:
+        table_points = table_slab(plant, table_size, table_resolution)
+    return PlantScene(points=plant, scale=float(scale), rotation_deg=float(rotation_deg),
+                      offset=offset, table_points=table_points)
+
+
+def table_slab(plant_points: np.ndarray, size: float = 0.4, resolution: float = 0.002) -> np.ndarray:
+    """Voxel centres of a one-voxel-thick square table under the plant (centred at x = y = 0).
+
+    The slab sits at ``z = lowest plant point - resolution`` (SPEC.md).
+    """
+    z = np.asarray(plant_points)[:, 2].min() - resolution
+    half = size / 2
+    lo = voxels.voxel_keys(np.array([[-half, -half, z]]), resolution)[0]
+    hi = voxels.voxel_keys(np.array([[half, half, z]]), resolution)[0]
+    ii, jj = np.meshgrid(np.arange(lo[0], hi[0] + 1), np.arange(lo[1], hi[1] + 1), indexing="ij")
+    keys = np.stack([ii.ravel(), jj.ravel(), np.full(ii.size, lo[2])], axis=1)
+    return voxels.key_centres(keys, resolution)
+

@@ -1,0 +1,117 @@
+"""Voxel grids as plain integer key arrays.
+
+Convention (OctoMap's): the voxel of a point x is ``key = floor(x / resolution)`` per axis, and its
+centre is ``(key + 0.5) * resolution``. The grid is world aligned with its origin at 0, so two clouds
+voxelised at the same resolution share voxels exactly. A voxel set is an ``(N, 3) int64`` array of
+keys; set algebra works on keys packed into one ``int64`` code per voxel (21 bits per axis), which
+lets numpy's sorted-array set routines do the work.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from tpvp.errors import ConfigError, PointCloudError
+
+_BITS = 21
+_OFFSET = 1 << (_BITS - 1)  # keys in [-2^20, 2^20): +-1 km at 1 mm voxels
+_MASK = (1 << _BITS) - 1
+
+
+def _check_resolution(resolution: float) -> float:
+    resolution = float(resolution)
+    if not np.isfinite(resolution) or resolution <= 0:
+        raise ConfigError(f"voxel resolution must be a positive number of metres, got {resolution!r}")
+    return resolution
+
+
+def voxel_keys(points: np.ndarray, resolution: float) -> np.ndarray:
+    """Integer voxel key of every point (duplicates kept), ``(N, 3) int64``."""
+    resolution = _check_resolution(resolution)
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    if not np.all(np.isfinite(points)):
+        raise PointCloudError("cannot voxelise a cloud with NaN or infinite coordinates")
+    keys = np.floor(points / resolution).astype(np.int64)
+    if keys.size and (keys.min() < -_OFFSET or keys.max() >= _OFFSET):
+        raise PointCloudError(
+            f"coordinates span {np.ptp(points, axis=0).max():.3g} m, too large for voxels of "
+            f"{resolution} m (wrong units?)"
+        )
+    return keys
+
+
+def key_centres(keys: np.ndarray, resolution: float) -> np.ndarray:
+    """Centres of voxels given by their keys, ``(N, 3) float64``."""
+    resolution = _check_resolution(resolution)
+    return (np.asarray(keys, dtype=np.int64).reshape(-1, 3) + 0.5) * resolution
+
+
+def encode_keys(keys: np.ndarray) -> np.ndarray:
+    """Pack ``(N, 3)`` keys into one sortable ``int64`` code each."""
+    keys = np.asarray(keys, dtype=np.int64).reshape(-1, 3) + _OFFSET
+    return (keys[:, 0] << (2 * _BITS)) | (keys[:, 1] << _BITS) | keys[:, 2]
+
+
+def decode_keys(codes: np.ndarray) -> np.ndarray:
+    """Inverse of :func:`encode_keys`."""
+    codes = np.asarray(codes, dtype=np.int64).reshape(-1)
+    keys = np.stack([(codes >> (2 * _BITS)) & _MASK, (codes >> _BITS) & _MASK, codes & _MASK], axis=1)
+    return keys - _OFFSET
+
+
+def unique_keys(keys: np.ndarray, return_counts: bool = False):
+    """Distinct keys in code order (optionally with how many times each occurred)."""
+    codes, counts = np.unique(encode_keys(keys), return_counts=True)
+    return (decode_keys(codes), counts) if return_counts else decode_keys(codes)
+
+
+def voxelise(points: np.ndarray, resolution: float) -> np.ndarray:
+    """Distinct voxel keys occupied by a cloud."""
+    return unique_keys(voxel_keys(points, resolution))
+
+
+def voxel_centres(points: np.ndarray, resolution: float) -> np.ndarray:
+    """Centres of the distinct voxels occupied by a cloud (the usual 'voxel-downsampled' cloud)."""
+    return key_centres(voxelise(points, resolution), resolution)
+
+
+def union_keys(*key_sets: np.ndarray) -> np.ndarray:
+    """Voxels in any of the sets."""
+    codes = [encode_keys(k) for k in key_sets]
+    return decode_keys(np.unique(np.concatenate(codes))) if codes else np.zeros((0, 3), np.int64)
+
+
+def intersect_keys(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Voxels in both sets."""
+    return decode_keys(np.intersect1d(encode_keys(a), encode_keys(b)))
+
+
+def difference_keys(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Voxels of ``a`` that are not in ``b``."""
+    return decode_keys(np.setdiff1d(encode_keys(a), encode_keys(b)))
+
+
+def contains_keys(keys: np.ndarray, query: np.ndarray) -> np.ndarray:
+    """Boolean mask: which ``query`` keys belong to the set ``keys``."""
+    return np.isin(encode_keys(query), encode_keys(keys))
+
+
+def spherical_offsets(radius_voxels: float) -> np.ndarray:
+    """All integer offsets ``o`` with ``|o|^2 <= radius^2`` (the spherical structuring element).
+
+    A radius of 1 gives the 7-voxel cross (centre + 6 face neighbours); 0 gives the centre only.
+    The small tolerance keeps offsets that lie exactly on the sphere despite rounding.
+    """
+    if radius_voxels < 0 or not np.isfinite(radius_voxels):
+        raise ConfigError(f"dilation radius must be >= 0 voxels, got {radius_voxels!r}")
+    r = int(np.floor(radius_voxels + 1e-9))
+    axis = np.arange(-r, r + 1)
+    grid = np.stack(np.meshgrid(axis, axis, axis, indexing="ij"), axis=-1).reshape(-1, 3)
+    return grid[(grid**2).sum(axis=1) <= radius_voxels**2 + 1e-6].astype(np.int64)
+
+
+def dilate_keys(keys: np.ndarray, radius_voxels: float) -> np.ndarray:
+    """Morphological dilation of a voxel set by a sphere of ``radius_voxels`` voxels."""
+    keys = np.asarray(keys, dtype=np.int64).reshape(-1, 3)
+    offsets = spherical_offsets(radius_voxels)
+    return unique_keys((keys[:, None, :] + offsets[None, :, :]).reshape(-1, 3))

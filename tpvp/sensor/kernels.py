@@ -1,0 +1,310 @@
+"""Numba kernels of the two measurement models, one view or many views at once.
+
+* ``reference`` (the authors' simulator, SPEC.md): every occupied voxel whose centre lies in front
+  of the camera and projects inside the image spawns one ray toward its centre; the first occupied
+  voxel along it is observed.
+* ``pixel`` (a real depth camera): one ray per pixel (optional stride). Computed as a z-buffer over
+  the exposed, camera-facing voxel faces: a pixel ray first enters an occupied voxel through such a
+  face, so the nearest face it crosses is the first occupied voxel of the DDA. Each candidate pixel
+  is tested exactly (ray-plane intersection inside the face square), the projected face only bounds
+  which pixels to test.
+
+Single views run serially; batches of views are parallel over views, because numba's thread pool
+stalls on sub-millisecond work when the other core is busy.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit, prange
+
+from tpvp.sensor.raycast import MISS, cast_ray
+
+
+@njit(cache=True, inline="always")
+def _segment_exit(pos, rx, ry, rz, box):
+    """Parameter where the segment ``pos + t r`` (``t`` in [0, 1]) leaves the box ``(lo, hi)``.
+
+    Negative when the segment misses the box.
+    """
+    t0 = 0.0
+    t1 = 1.0
+    for a in range(3):
+        d = rx if a == 0 else (ry if a == 1 else rz)
+        if d == 0.0:
+            if pos[a] < box[a] or pos[a] > box[a + 3]:
+                return -1.0
+        else:
+            ta = (box[a] - pos[a]) / d
+            tb = (box[a + 3] - pos[a]) / d
+            if ta > tb:
+                ta, tb = tb, ta
+            t0 = max(t0, ta)
+            t1 = min(t1, tb)
+            if t0 > t1:
+                return -1.0
+    return t1
+
+
+@njit(cache=True)
+def reference_view(pos, rot, fx, fy, cx, cy, width, height, centres, index, clearance, lo, res,
+                   max_range_sq, countable, countable_box, first_hit):
+    """Fill ``first_hit[i]`` with the voxel seen along the ray toward centre ``i`` (MISS if none).
+
+    Only the part of each ray inside ``countable_box`` (the box around every countable voxel, padded
+    by one voxel) can end on a voxel that counts, so rays are cut where their segment (camera to
+    target centre) leaves that box, and not cast at all when they miss it: the table then costs
+    almost nothing. Other voxels still block. Returns the number of rays cast.
+    """
+    rays = 0
+    for i in range(centres.shape[0]):
+        first_hit[i] = MISS
+        rx = centres[i, 0] - pos[0]
+        ry = centres[i, 1] - pos[1]
+        rz = centres[i, 2] - pos[2]
+        zc = rot[0, 2] * rx + rot[1, 2] * ry + rot[2, 2] * rz
+        if zc <= 0.0:
+            continue
+        xc = rot[0, 0] * rx + rot[1, 0] * ry + rot[2, 0] * rz
+        u = fx * xc / zc + cx
+        if u < 0.0 or u > width:
+            continue
+        yc = rot[0, 1] * rx + rot[1, 1] * ry + rot[2, 1] * rz
+        v = fy * yc / zc + cy
+        if v < 0.0 or v > height:
+            continue
+        t_stop = _segment_exit(pos, rx, ry, rz, countable_box)
+        if t_stop < 0.0:
+            continue
+        rays += 1
+        first_hit[i] = cast_ray(pos[0], pos[1], pos[2], rx, ry, rz, index, clearance,
+                                lo[0], lo[1], lo[2], res, max_range_sq, t_stop)
+    return rays
+
+
+@njit(cache=True)
+def countable_hit_ids(first_hit, countable):
+    """Sorted distinct countable voxel ids in ``first_hit`` (a marker array, no sort)."""
+    seen = np.zeros(countable.shape[0], dtype=np.bool_)
+    _mark_hits(first_hit, countable, seen)
+    return np.flatnonzero(seen)
+
+
+@njit(cache=True)
+def _mark_hits(first_hit, countable, seen):
+    for i in range(first_hit.shape[0]):
+        h = first_hit[i]
+        if h >= 0 and countable[h]:
+            seen[h] = True
+
+
+@njit(cache=True, parallel=True)
+def reference_views(positions, rotations, fx, fy, cx, cy, width, height, centres, index, clearance,
+                    lo, res, max_range_sq, countable, countable_box, seen):
+    """``seen[v, id] = True`` for every countable voxel observed from view ``v`` (parallel over views)."""
+    n = centres.shape[0]
+    for v in prange(positions.shape[0]):
+        first_hit = np.empty(n, dtype=np.int64)
+        reference_view(positions[v], rotations[v], fx, fy, cx, cy, width, height, centres, index,
+                       clearance, lo, res, max_range_sq, countable, countable_box, first_hit)
+        _mark_hits(first_hit, countable, seen[v])
+
+
+# --------------------------------------------------------------------------------------------
+# pixel model
+
+
+@njit(cache=True)
+def exposed_faces(keys, index, lo):
+    """6-bit mask per voxel: bit ``2*axis`` = face on the low side exposed, ``2*axis+1`` = high side."""
+    n0, n1, n2 = index.shape
+    out = np.zeros(keys.shape[0], dtype=np.uint8)
+    for i in range(keys.shape[0]):
+        base = (keys[i, 0] - lo[0], keys[i, 1] - lo[1], keys[i, 2] - lo[2])
+        mask = 0
+        for axis in range(3):
+            for side in range(2):
+                nb0, nb1, nb2 = base
+                delta = 1 if side == 1 else -1
+                if axis == 0:
+                    nb0 += delta
+                elif axis == 1:
+                    nb1 += delta
+                else:
+                    nb2 += delta
+                empty = True
+                if 0 <= nb0 < n0 and 0 <= nb1 < n1 and 0 <= nb2 < n2:
+                    empty = index[nb0, nb1, nb2] < 0
+                if empty:
+                    mask |= 1 << (2 * axis + side)
+        out[i] = mask
+    return out
+
+
+@njit(cache=True)
+def pixel_window(pos, rot, fx, fy, cx, cy, width, height, stride, centres, res):
+    """Strided pixel rows/columns ``(row0, row1, col0, col1)`` (inclusive) that any voxel can cover.
+
+    Bounds each voxel by its circumscribed sphere; a voxel reaching behind the image plane makes the
+    window the whole image.
+    """
+    rows = (height + stride - 1) // stride
+    cols = (width + stride - 1) // stride
+    radius = 0.8660254037844387 * res
+    umin = np.inf
+    umax = -np.inf
+    vmin = np.inf
+    vmax = -np.inf
+    for i in range(centres.shape[0]):
+        rx = centres[i, 0] - pos[0]
+        ry = centres[i, 1] - pos[1]
+        rz = centres[i, 2] - pos[2]
+        zc = rot[0, 2] * rx + rot[1, 2] * ry + rot[2, 2] * rz
+        if zc <= -radius:
+            continue
+        if zc <= radius + 1e-9:
+            return 0, rows - 1, 0, cols - 1
+        u = fx * (rot[0, 0] * rx + rot[1, 0] * ry + rot[2, 0] * rz) / zc + cx
+        v = fy * (rot[0, 1] * rx + rot[1, 1] * ry + rot[2, 1] * rz) / zc + cy
+        # The sphere's projection: its centre's projection +- a radius scaled by the nearest depth,
+        # inflated for the off-axis stretch (a generous factor; only the window size depends on it).
+        slack = 2.0 * radius * max(fx, fy) / (zc - radius) * (1.0 + (abs(u - cx) + abs(v - cy)) / fx)
+        umin = min(umin, u - slack)
+        umax = max(umax, u + slack)
+        vmin = min(vmin, v - slack)
+        vmax = max(vmax, v + slack)
+    if umin > umax:
+        return 0, -1, 0, -1
+    c0 = max(0, np.int64(np.floor((umin - 2.0) / stride)))
+    c1 = min(cols - 1, np.int64(np.ceil((umax + 2.0) / stride)))
+    r0 = max(0, np.int64(np.floor((vmin - 2.0) / stride)))
+    r1 = min(rows - 1, np.int64(np.ceil((vmax + 2.0) / stride)))
+    return r0, r1, c0, c1
+
+
+@njit(cache=True)
+def pixel_view(pos, rot, fx, fy, cx, cy, stride, keys, exposed, res, row0, col0, depth, hit):
+    """Z-buffer of exposed camera-facing faces on a window of the strided pixel grid.
+
+    ``depth``/``hit`` cover strided pixel rows ``row0 ..`` and columns ``col0 ..`` (see
+    :func:`pixel_window`); on return ``hit`` holds the id of the first occupied voxel of each pixel
+    ray (MISS if none) and ``depth`` its camera-z depth. Range is not applied here.
+    """
+    rows, cols = hit.shape
+    for r in range(rows):
+        for c in range(cols):
+            depth[r, c] = np.inf
+            hit[r, c] = MISS
+    corner = np.empty(3)
+    for i in range(keys.shape[0]):
+        mask = exposed[i]
+        if mask == 0:
+            continue
+        for a in range(3):
+            low = keys[i, a] * res
+            high = (keys[i, a] + 1) * res
+            if pos[a] > high:
+                plane = high
+                bit = 2 * a + 1
+            elif pos[a] < low:
+                plane = low
+                bit = 2 * a
+            else:
+                continue  # the camera is level with this pair of faces: neither faces it
+            if (mask >> bit) & 1 == 0:
+                continue
+            b = (a + 1) % 3
+            e = (a + 2) % 3
+            b_lo = keys[i, b] * res
+            b_hi = (keys[i, b] + 1) * res
+            e_lo = keys[i, e] * res
+            e_hi = (keys[i, e] + 1) * res
+            # Pixel bounding box of the projected face (one pixel of slack against rounding).
+            umin = np.inf
+            umax = -np.inf
+            vmin = np.inf
+            vmax = -np.inf
+            behind = False
+            for q in range(4):
+                corner[a] = plane
+                corner[b] = b_lo if (q & 1) == 0 else b_hi
+                corner[e] = e_lo if (q & 2) == 0 else e_hi
+                rx = corner[0] - pos[0]
+                ry = corner[1] - pos[1]
+                rz = corner[2] - pos[2]
+                zc = rot[0, 2] * rx + rot[1, 2] * ry + rot[2, 2] * rz
+                if zc <= 1e-12:
+                    behind = True
+                    break
+                u = fx * (rot[0, 0] * rx + rot[1, 0] * ry + rot[2, 0] * rz) / zc + cx
+                v = fy * (rot[0, 1] * rx + rot[1, 1] * ry + rot[2, 1] * rz) / zc + cy
+                umin = min(umin, u)
+                umax = max(umax, u)
+                vmin = min(vmin, v)
+                vmax = max(vmax, v)
+            if behind:
+                c0, c1, r0, r1 = 0, cols - 1, 0, rows - 1  # face crosses the image plane: test all
+            else:
+                c0 = max(0, np.int64(np.ceil((umin - 1.0) / stride)) - col0)
+                c1 = min(cols - 1, np.int64(np.floor((umax + 1.0) / stride)) - col0)
+                r0 = max(0, np.int64(np.ceil((vmin - 1.0) / stride)) - row0)
+                r1 = min(rows - 1, np.int64(np.floor((vmax + 1.0) / stride)) - row0)
+            for r in range(r0, r1 + 1):
+                yn = ((r + row0) * stride - cy) / fy
+                for c in range(c0, c1 + 1):
+                    xn = ((c + col0) * stride - cx) / fx
+                    d0 = rot[0, 0] * xn + rot[0, 1] * yn + rot[0, 2]
+                    d1 = rot[1, 0] * xn + rot[1, 1] * yn + rot[1, 2]
+                    d2 = rot[2, 0] * xn + rot[2, 1] * yn + rot[2, 2]
+                    da = d0 if a == 0 else (d1 if a == 1 else d2)
+                    if da == 0.0:
+                        continue
+                    t = (plane - pos[a]) / da
+                    if t <= 0.0 or t >= depth[r, c]:
+                        continue
+                    db = d0 if b == 0 else (d1 if b == 1 else d2)
+                    de = d0 if e == 0 else (d1 if e == 1 else d2)
+                    pb = pos[b] + t * db
+                    if pb < b_lo or pb > b_hi:
+                        continue
+                    pe = pos[e] + t * de
+                    if pe < e_lo or pe > e_hi:
+                        continue
+                    depth[r, c] = t
+                    hit[r, c] = i
+
+
+@njit(cache=True)
+def _mark_pixel_hits(hit, pos, centres, countable, max_range_sq, seen):
+    rows, cols = hit.shape
+    for r in range(rows):
+        for c in range(cols):
+            h = hit[r, c]
+            if h >= 0 and countable[h] and not seen[h]:
+                dx = centres[h, 0] - pos[0]
+                dy = centres[h, 1] - pos[1]
+                dz = centres[h, 2] - pos[2]
+                if dx * dx + dy * dy + dz * dz <= max_range_sq:
+                    seen[h] = True
+
+
+@njit(cache=True)
+def pixel_view_seen(pos, rot, fx, fy, cx, cy, width, height, stride, keys, exposed, res, centres,
+                    max_range_sq, countable, seen):
+    """Mark in ``seen`` the countable voxels (within range) that any pixel ray of the view hits."""
+    r0, r1, c0, c1 = pixel_window(pos, rot, fx, fy, cx, cy, width, height, stride, centres, res)
+    if r1 < r0 or c1 < c0:
+        return
+    depth = np.empty((r1 - r0 + 1, c1 - c0 + 1))
+    hit = np.empty((r1 - r0 + 1, c1 - c0 + 1), dtype=np.int64)
+    pixel_view(pos, rot, fx, fy, cx, cy, stride, keys, exposed, res, r0, c0, depth, hit)
+    _mark_pixel_hits(hit, pos, centres, countable, max_range_sq, seen)
+
+
+@njit(cache=True, parallel=True)
+def pixel_views(positions, rotations, fx, fy, cx, cy, width, height, stride, keys, exposed, res,
+                centres, max_range_sq, countable, seen):
+    """``seen[v, id] = True`` for every countable voxel seen by a pixel of view ``v``."""
+    for v in prange(positions.shape[0]):
+        pixel_view_seen(positions[v], rotations[v], fx, fy, cx, cy, width, height, stride, keys,
+                        exposed, res, centres, max_range_sq, countable, seen[v])

@@ -1,0 +1,145 @@
+"""The virtual sensor: which ground-truth voxels a camera view observes.
+
+Two measurement models over one :class:`~tpvp.sensor.grid.OccupancyGrid` (see
+:mod:`tpvp.sensor.kernels`): ``reference`` (default; the authors' voxel-driven simulator, behind
+every number compared with the paper) and ``pixel`` (one ray per pixel, like a real depth camera).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from tpvp.errors import ConfigError, SensorError
+from tpvp.scene import voxels
+from tpvp.sensor import kernels
+from tpvp.sensor.camera import D435, Intrinsics, look_at_rotation
+from tpvp.sensor.grid import OccupancyGrid
+
+MODELS = ("reference", "pixel")
+
+
+@dataclass(frozen=True)
+class SensorConfig:
+    """Measurement model and its parameters (defaults: single-plant setting of the paper)."""
+
+    model: str = "reference"
+    max_range: float = 1.0  # m; 2.0 in greenhouse rows
+    pixel_stride: int = 1  # pixel model only
+    intrinsics: Intrinsics = field(default=D435)
+
+    def __post_init__(self):
+        if self.model not in MODELS:
+            raise ConfigError(f"unknown sensor model {self.model!r}; choose one of {', '.join(MODELS)}")
+        if not (self.max_range > 0):
+            raise ConfigError(f"max_range must be > 0 m, got {self.max_range!r}")
+        if int(self.pixel_stride) < 1:
+            raise ConfigError(f"pixel_stride must be a positive integer, got {self.pixel_stride!r}")
+
+
+def check_camera(grid: OccupancyGrid, position) -> np.ndarray:
+    """Reject cameras placed inside an occupied voxel (the ray caster would see only that voxel)."""
+    position = np.asarray(position, dtype=np.float64).reshape(3)
+    if not np.all(np.isfinite(position)):
+        raise SensorError(f"camera position {position.tolist()} is not finite")
+    local = np.floor(position / grid.resolution).astype(np.int64) - grid.origin_key
+    if np.all((local >= 0) & (local < grid.index.shape)) and grid.index[tuple(local)] >= 0:
+        raise SensorError(
+            f"camera at {position.round(4).tolist()} m lies inside the geometry (an occupied voxel)"
+        )
+    return position
+
+
+def _extras(grid: OccupancyGrid) -> dict:
+    # Derived arrays used by the kernels, computed once per grid and cached on the instance.
+    cache = grid.__dict__.setdefault("_kernel_cache", {})
+    if not cache:
+        cache["centres"] = np.ascontiguousarray(grid.centres)
+        cache["lo"] = np.ascontiguousarray(grid.origin_key)
+        cache["countable"] = np.ascontiguousarray(grid.countable)
+        cache["keys"] = np.ascontiguousarray(grid.keys)
+        cache["exposed"] = kernels.exposed_faces(cache["keys"], grid.index, cache["lo"])
+        counted = grid.keys[grid.countable] if grid.countable.any() else grid.keys
+        cache["countable_box"] = np.concatenate(
+            [(counted.min(axis=0) - 1) * grid.resolution, (counted.max(axis=0) + 2) * grid.resolution])
+    return cache
+
+
+def observe(grid: OccupancyGrid, position, look_at, config: SensorConfig = SensorConfig()) -> np.ndarray:
+    """Sorted ids of the countable voxels observed from one view."""
+    position = check_camera(grid, position)
+    rotation = look_at_rotation(position, look_at)
+    ex = _extras(grid)
+    k = config.intrinsics
+    if config.model == "reference":
+        first_hit = np.empty(grid.size, dtype=np.int64)
+        kernels.reference_view(position, rotation, k.fx, k.fy, k.cx, k.cy, k.width, k.height,
+                               ex["centres"], grid.index, grid.clearance, ex["lo"], grid.resolution,
+                               config.max_range**2, ex["countable"], ex["countable_box"], first_hit)
+        return kernels.countable_hit_ids(first_hit, ex["countable"])
+    seen = np.zeros(grid.size, dtype=np.bool_)
+    kernels.pixel_view_seen(position, rotation, k.fx, k.fy, k.cx, k.cy, k.width, k.height,
+                            int(config.pixel_stride), ex["keys"], ex["exposed"], grid.resolution,
+                            ex["centres"], config.max_range**2, ex["countable"], seen)
+    return np.flatnonzero(seen)
+
+
+def depth_image(grid: OccupancyGrid, position, look_at, config: SensorConfig = SensorConfig()):
+    """Pixel model image: ``(depth, voxel_id)`` arrays over the strided pixel grid.
+
+    ``depth`` is the camera-z depth of the first surface along each pixel ray (``inf`` where the
+    ray sees nothing within range), ``voxel_id`` the id of that voxel (``-1`` for none).
+    """
+    position = check_camera(grid, position)
+    rotation = look_at_rotation(position, look_at)
+    ex = _extras(grid)
+    k = config.intrinsics
+    stride = int(config.pixel_stride)
+    shape = (-(-k.height // stride), -(-k.width // stride))
+    depth = np.empty(shape)
+    hit = np.empty(shape, dtype=np.int64)
+    kernels.pixel_view(position, rotation, k.fx, k.fy, k.cx, k.cy, stride, ex["keys"], ex["exposed"],
+                       grid.resolution, 0, 0, depth, hit)
+    found = hit >= 0
+    offset = ex["centres"][hit[found]] - position
+    too_far = (offset**2).sum(axis=1) > config.max_range**2
+    idx = np.flatnonzero(found.ravel())[too_far]
+    hit.ravel()[idx] = -1
+    depth.ravel()[idx] = np.inf
+    return depth, hit
+
+
+def observe_many(grid: OccupancyGrid, positions, look_ats, config: SensorConfig = SensorConfig(),
+                 chunk: int | None = None) -> np.ndarray:
+    """Boolean matrix ``(views, voxels)``: which countable voxels each view observes.
+
+    Dense rows are produced chunk by chunk (parallel over views); use
+    :func:`tpvp.visibility.visibility_matrix` for the sparse form.
+    """
+    positions = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
+    look_ats = np.broadcast_to(np.asarray(look_ats, dtype=np.float64).reshape(-1, 3), positions.shape)
+    for p in positions:
+        check_camera(grid, p)
+    rotations = np.stack([look_at_rotation(p, t) for p, t in zip(positions, look_ats)]) if len(
+        positions) else np.zeros((0, 3, 3))
+    return _observe_rotated(grid, positions, rotations, config)
+
+
+def _observe_rotated(grid, positions, rotations, config):
+    ex = _extras(grid)
+    k = config.intrinsics
+    seen = np.zeros((len(positions), grid.size), dtype=np.bool_)
+    if len(positions) == 0:
+        return seen
+    positions = np.ascontiguousarray(positions)
+    rotations = np.ascontiguousarray(rotations)
+    if config.model == "reference":
+        kernels.reference_views(positions, rotations, k.fx, k.fy, k.cx, k.cy, k.width, k.height,
+                                ex["centres"], grid.index, grid.clearance, ex["lo"], grid.resolution,
+                                config.max_range**2, ex["countable"], ex["countable_box"], seen)
+    else:
+        kernels.pixel_views(positions, rotations, k.fx, k.fy, k.cx, k.cy, k.width, k.height,
+                            int(config.pixel_stride), ex["keys"], ex["exposed"], grid.resolution,
+                            ex["centres"], config.max_range**2, ex["countable"], seen)
+    return seen

@@ -1,0 +1,59 @@
+"""Visibility matrices (views x voxels) and the oracle-normalised coverage of the paper (Eq. Omega)."""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy import sparse
+from tqdm.auto import tqdm
+
+from tpvp.sensor.camera import look_at_rotation
+from tpvp.sensor.grid import OccupancyGrid
+from tpvp.sensor.sensor import SensorConfig, _observe_rotated, check_camera
+
+
+def visibility_matrix(grid: OccupancyGrid, positions, look_ats, config: SensorConfig = SensorConfig(),
+                      chunk_size: int = 256, progress: bool | None = None) -> sparse.csr_matrix:
+    """Sparse boolean matrix ``(views, voxels)``: ``[v, i]`` is True when view ``v`` observes voxel ``i``.
+
+    Voxel ids are those of ``grid`` (non-countable voxels, e.g. the table, have empty columns).
+    Views are processed in chunks, in parallel within a chunk; ``progress`` shows a bar
+    (default: only for more than 1,000 views).
+    """
+    positions = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
+    look_ats = np.broadcast_to(np.asarray(look_ats, dtype=np.float64).reshape(-1, 3), positions.shape)
+    for p in positions:
+        check_camera(grid, p)
+    rotations = np.stack([look_at_rotation(p, t) for p, t in zip(positions, look_ats)]) if len(
+        positions) else np.zeros((0, 3, 3))
+    if progress is None:
+        progress = len(positions) > 1000
+    blocks = []
+    starts = range(0, len(positions), chunk_size)
+    for start in tqdm(starts, desc="visibility", unit="chunk", disable=not progress):
+        stop = start + chunk_size
+        seen = _observe_rotated(grid, positions[start:stop], rotations[start:stop], config)
+        blocks.append(sparse.csr_matrix(seen))
+    if not blocks:
+        return sparse.csr_matrix((0, grid.size), dtype=bool)
+    return sparse.vstack(blocks, format="csr").astype(bool)
+
+
+def oracle_voxels(matrix: sparse.spmatrix) -> np.ndarray:
+    """Ids of voxels seen by at least one view (the oracle visible set Omega)."""
+    return np.flatnonzero(np.asarray(matrix.sum(axis=0)).ravel() > 0)
+
+
+def covered_voxels(matrix: sparse.spmatrix, views) -> np.ndarray:
+    """Ids of voxels seen by at least one of the given views (row indices of ``matrix``)."""
+    views = np.asarray(views, dtype=np.int64).reshape(-1)
+    if views.size == 0:
+        return np.zeros(0, dtype=np.int64)
+    return oracle_voxels(matrix[views])
+
+
+def coverage_ratio(covered, oracle) -> float:
+    """``|covered & oracle| / |oracle|`` (paper's oracle-normalised surface coverage)."""
+    oracle = np.asarray(oracle)
+    if oracle.size == 0:
+        return float("nan")
+    return float(np.isin(oracle, np.asarray(covered)).sum() / oracle.size)
