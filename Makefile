@@ -42,6 +42,9 @@ test: $(STAMP)
 bench: $(STAMP)
 	$(BIN)/python -m pip install --quiet -r benchmarks/requirements.txt
 	$(BIN)/python benchmarks/sensor_bench.py
+	$(BIN)/python benchmarks/oracle_bench.py
+	$(BIN)/python benchmarks/plant_realism.py
+	$(BIN)/python benchmarks/row_realism.py
 
 clean:
 	rm -rf $(VENV) $(OUT) .pytest_cache

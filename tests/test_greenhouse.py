@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-from tpvp.errors import ConfigError
+from tpvp.errors import ConfigError, InputFileError
 from tpvp.scene.boxes import OrientedBox, room_config
 from tpvp.scene.greenhouse import (
     DATES,
@@ -201,15 +201,15 @@ def test_save_row_sessions_round_trip(tmp_path):
 
 
 def test_save_failure_leaves_no_temp_file(tmp_path, monkeypatch):
-    import tpvp.scene.greenhouse as gh
+    import tpvp.io.atomic as atomic
 
     seq = generate_row_sessions("room1", seed=0, n_sessions=1, point_spacing=0.03)
 
     def boom(*args, **kwargs):
         raise OSError("disk full")
 
-    monkeypatch.setattr(gh.os, "replace", boom)
-    with pytest.raises(OSError, match="disk full"):
+    monkeypatch.setattr(atomic.os, "replace", boom)
+    with pytest.raises(InputFileError, match="disk full"):
         save_row_sessions(seq, tmp_path)
     assert list(tmp_path.iterdir()) == []
 

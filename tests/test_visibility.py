@@ -5,9 +5,7 @@ import pytest
 from scipy import sparse
 
 from tpvp.errors import ConfigError
-from tpvp.scene import voxels
 from tpvp.sensor import bruteforce
-from tpvp.sensor.grid import build_grid
 from tpvp.sensor.sensor import SensorConfig, observe
 from tpvp.visibility import coverage_ratio, covered_voxels, oracle_voxels, visibility_matrix
 from tpvp.visibility.oracle import greenhouse_oracle

@@ -36,14 +36,13 @@ from __future__ import annotations
 
 import datetime as _dt
 import json
-import os
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from tpvp.errors import ConfigError, InputFileError
+from tpvp.io import atomic_write_text, write_point_cloud
 from tpvp.scene.boxes import OrientedBox, room_config
 from tpvp.scene.voxels import voxelise
 
@@ -672,41 +671,6 @@ def generate_row_sessions(
 
 
 # ============================================================================ saving
-def _atomic_write(path: Path, payload: bytes) -> None:
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(payload)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
-
-
-def _pcd_bytes(points: np.ndarray) -> bytes:
-    pts = np.ascontiguousarray(points, dtype="<f4")
-    n = pts.shape[0]
-    header = (
-        "# .PCD v0.7 - Point Cloud Data file format\n"
-        "VERSION 0.7\n"
-        "FIELDS x y z\n"
-        "SIZE 4 4 4\n"
-        "TYPE F F F\n"
-        "COUNT 1 1 1\n"
-        f"WIDTH {n}\n"
-        "HEIGHT 1\n"
-        "VIEWPOINT 0 0 0 1 0 0 0\n"
-        f"POINTS {n}\n"
-        "DATA binary\n"
-    )
-    return header.encode("ascii") + pts.tobytes()
-
-
 def save_row_sessions(sessions, folder) -> Path:
     """Write sessions as the dataset's processed models ``<folder>/room<k>_<YYYYMMDD>.pcd``.
 
@@ -733,10 +697,7 @@ def save_row_sessions(sessions, folder) -> Path:
     files = []
     for s in sessions:
         path = folder / f"{s.name}.pcd"
-        try:
-            _atomic_write(path, _pcd_bytes(s.points))
-        except OSError as exc:
-            raise InputFileError(f"{path}: cannot write ({exc})") from None
+        write_point_cloud(path, s.points, binary=True, dtype=np.float32)
         files.append(path.name)
     first = sessions[0]
     manifest = {
@@ -763,10 +724,7 @@ def save_row_sessions(sessions, folder) -> Path:
         ],
     }
     path = folder / "manifest.json"
-    try:
-        _atomic_write(path, (json.dumps(manifest, indent=2) + "\n").encode("utf-8"))
-    except OSError as exc:
-        raise InputFileError(f"{path}: cannot write ({exc})") from None
+    atomic_write_text(path, json.dumps(manifest, indent=2) + "\n")
     return path
 
 

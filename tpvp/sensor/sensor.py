@@ -12,7 +12,6 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from tpvp.errors import ConfigError, SensorError
-from tpvp.scene import voxels
 from tpvp.sensor import kernels
 from tpvp.sensor.camera import D435, Intrinsics, look_at_rotation
 from tpvp.sensor.grid import OccupancyGrid

@@ -24,12 +24,15 @@ from tpvp.sensor.raycast import cast_ray
 @njit(cache=True)
 def _search_voxel(i, viewpoints, centres, index, clearance, lo, res, max_range_sq, first_tries,
                   blockers):
-    """Nearest-first search for voxel ``i``; returns True on success, marks blockers of failures."""
+    """Nearest-first search for voxel ``i``; marks blockers of failed rays.
+
+    Returns ``(success, rays cast)``.
+    """
     c = centres[i]
     d2 = ((viewpoints - c) ** 2).sum(axis=1)
     candidates = np.flatnonzero(d2 <= max_range_sq)
     if candidates.size == 0:
-        return False
+        return False, 0
     # Try the few nearest points first (most visible voxels succeed there); sort the rest only
     # when they all fail. The visiting order is the same as a full sort.
     cand_d2 = d2[candidates]
@@ -39,38 +42,41 @@ def _search_voxel(i, viewpoints, centres, index, clearance, lo, res, max_range_s
         near = np.arange(candidates.size)
     near = near[np.argsort(cand_d2[near], kind="mergesort")]
     tried = np.zeros(candidates.size, dtype=np.bool_)
+    rays = 0
     for phase in range(2):
         if phase == 1:
             rest = np.flatnonzero(~tried)
             near = rest[np.argsort(cand_d2[rest], kind="mergesort")]
         for j in near:
             tried[j] = True
+            rays += 1
             p = viewpoints[candidates[j]]
             hit = cast_ray(p[0], p[1], p[2], c[0] - p[0], c[1] - p[1], c[2] - p[2], index, clearance,
                            lo[0], lo[1], lo[2], res, max_range_sq, np.inf)
             if hit == i:
-                return True
+                return True, rays
             if hit >= 0:
                 blockers[hit] = True
         if phase == 0 and tried.all():
             break
-    return False
+    return False, rays
 
 
 @njit(cache=True, parallel=True)
 def _oracle_chunk(ids, viewpoints, centres, index, clearance, lo, res, max_range_sq, first_tries,
-                  found, blockers):
+                  found, blockers, rays):
     for n in prange(ids.shape[0]):
         i = ids[n]
-        found[i] = _search_voxel(i, viewpoints, centres, index, clearance, lo, res, max_range_sq,
-                                 first_tries, blockers)
+        found[i], rays[i] = _search_voxel(i, viewpoints, centres, index, clearance, lo, res,
+                                          max_range_sq, first_tries, blockers)
 
 
 def greenhouse_oracle(grid: OccupancyGrid, viewpoints, max_range: float = 2.0, first_tries: int = 16,
-                      chunk_size: int = 20000, progress: bool | None = None) -> np.ndarray:
+                      chunk_size: int = 20000, progress: bool | None = None, return_rays: bool = False):
     """Sorted ids of the countable voxels visible from any viewpoint (FOV-free, see module doc).
 
-    ``viewpoints`` are the view-box grid points (e.g. ``OrientedBox.grid(0.1)``).
+    ``viewpoints`` are the view-box grid points (e.g. ``OrientedBox.grid(0.1)``). With
+    ``return_rays`` also returns the total number of rays cast (for benchmarks).
     """
     viewpoints = np.ascontiguousarray(np.asarray(viewpoints, dtype=np.float64).reshape(-1, 3))
     if len(viewpoints) == 0:
@@ -82,11 +88,12 @@ def greenhouse_oracle(grid: OccupancyGrid, viewpoints, max_range: float = 2.0, f
     ids = np.flatnonzero(grid.countable)
     found = np.zeros(grid.size, dtype=np.bool_)
     blockers = np.zeros(grid.size, dtype=np.bool_)
+    rays = np.zeros(grid.size, dtype=np.int64)
     if progress is None:
         progress = len(ids) > 50_000
     for start in tqdm(range(0, len(ids), chunk_size), desc="oracle", unit="chunk", disable=not progress):
         _oracle_chunk(ids[start:start + chunk_size], viewpoints, centres, grid.index, grid.clearance,
                       grid.origin_key, grid.resolution, float(max_range) ** 2, int(first_tries), found,
-                      blockers)
-    visible = (found | blockers) & grid.countable
-    return np.flatnonzero(visible)
+                      blockers, rays)
+    visible = np.flatnonzero((found | blockers) & grid.countable)
+    return (visible, int(rays.sum())) if return_rays else visible

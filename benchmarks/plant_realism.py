@@ -1,0 +1,114 @@
+"""Realism of the generated single plants against the bundled real Pheno4D scans.
+
+Every plant is set up as the single-plant experiments do it (largest bounding-box side 0.24 m,
+bounding-box centre, supporting table, 2 mm ground-truth voxels) and rendered from the 32 hemisphere
+views with the reference sensor. Columns: points, occupied voxels, bounding-box extent, horizontal
+extent along the plant's own principal axes (independent of azimuth), oracle share of the voxels,
+and the oracle coverage curve (greedy best views: coverage after 1, 2, 4 and 8 views), generation
+time. A second table reports session pairs (correspondences, new leaves, displacement).
+
+    python benchmarks/plant_realism.py [--seeds 6]
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+import pandas as pd
+
+from tpvp.scene import voxels
+from tpvp.scene.normalise import normalise_plant
+from tpvp.scene.plants import generate_plant, generate_session_pair
+from tpvp.scene.samples import load_sample
+from tpvp.sensor.grid import build_grid
+from tpvp.viewspace import load_view_space
+from tpvp.visibility import oracle_voxels, visibility_matrix
+
+CURVE_VIEWS = (1, 2, 4, 8)
+
+
+def greedy_curve(matrix, oracle, steps=CURVE_VIEWS):
+    """Coverage of the oracle after the best 1, 2, ... views chosen greedily."""
+    dense = matrix.toarray()[:, oracle]
+    covered = np.zeros(dense.shape[1], bool)
+    curve = {}
+    for k in range(1, max(steps) + 1):
+        gains = (dense & ~covered).sum(axis=1)
+        covered |= dense[int(np.argmax(gains))]
+        if k in steps:
+            curve[f"cov@{k}"] = covered.mean()
+    return curve
+
+
+def principal_horizontal_extent(points):
+    xy = points[:, :2] - points[:, :2].mean(axis=0)
+    _, vecs = np.linalg.eigh(np.cov(xy.T))
+    return np.ptp(xy @ vecs[:, ::-1], axis=0)
+
+
+def describe(name, seed, raw_points, views, seconds=None, leaves=None):
+    scene = normalise_plant(raw_points, table=True)
+    plant = voxels.voxelise(scene.points, 0.002)
+    table = voxels.voxelise(scene.table_points, 0.002)
+    grid = build_grid(np.concatenate([plant, table]), 0.002,
+                      np.r_[np.ones(len(plant), bool), np.zeros(len(table), bool)])
+    matrix = visibility_matrix(grid, views, np.zeros(3))
+    oracle = oracle_voxels(matrix)
+    ext = np.ptp(scene.points, axis=0)
+    major, minor = principal_horizontal_extent(scene.points)
+    return {"plant": name, "seed": seed, "points": len(raw_points), "voxels": len(plant),
+            "bbox (m)": f"{ext[0]:.3f} x {ext[1]:.3f} x {ext[2]:.3f}",
+            "principal xy (m)": f"{major:.3f} x {minor:.3f}", "leaves": leaves,
+            "oracle %": 100 * len(oracle) / len(plant),
+            **{k: 100 * v for k, v in greedy_curve(matrix, oracle).items()}, "gen s": seconds}
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seeds", type=int, default=6)
+    parser.add_argument("--days", type=float, nargs="+", default=[1.0, 2.0, 3.0])
+    args = parser.parse_args(argv)
+    views = load_view_space("hemisphere")
+    rows = []
+    for species in ("tomato", "maize"):
+        for seed in range(args.seeds):
+            started = time.perf_counter()
+            plant = generate_plant(species, seed)
+            seconds = time.perf_counter() - started
+            rows.append(describe(species, seed, plant.points, views, seconds, plant.leaf_count))
+    for name in ("tomato_0305", "tomato_0306", "maize_0313"):
+        rows.append(describe("real " + name, "", load_sample(name), views))
+    table = pd.DataFrame(rows)
+    print("hemisphere 32 views, table, 2 mm voxels, largest side 0.24 m; cov@k = oracle coverage "
+          "after the k best views (greedy), %")
+    print(table.to_string(index=False, float_format=lambda x: f"{x:.1f}", na_rep=""))
+    generated = table[table["gen s"].notna()]
+    for species in ("tomato", "maize"):
+        part = generated[generated["plant"] == species]
+        print(f"{species}: voxels {part['voxels'].min()}-{part['voxels'].max()}, "
+              f"oracle {part['oracle %'].min():.1f}-{part['oracle %'].max():.1f} %, "
+              f"cov@2 {part['cov@2'].min():.1f}-{part['cov@2'].max():.1f} %, "
+              f"generation {part['gen s'].mean():.3f} s mean / {part['gen s'].max():.3f} s max")
+
+    pairs = []
+    for species in ("tomato", "maize"):
+        for seed in range(min(args.seeds, 3)):
+            for days in args.days:
+                started = time.perf_counter()
+                pair = generate_session_pair(species, seed, days=days)
+                seconds = time.perf_counter() - started
+                moved = np.linalg.norm(pair.displacement, axis=1) * 1000
+                pairs.append({"plant": species, "seed": seed, "days": days,
+                              "previous pts": len(pair.previous.points), "current pts": len(pair.current.points),
+                              "correspondences": len(pair.correspondence_current_idx),
+                              "leaves": f"{pair.previous.leaf_count}->{pair.current.leaf_count}",
+                              "median mm": np.median(moved), "p95 mm": np.percentile(moved, 95),
+                              "max mm": moved.max(), "gen s": seconds})
+    print("\nsession pairs (displacement of corresponded points at the generated, real-size scale)")
+    print(pd.DataFrame(pairs).to_string(index=False, float_format=lambda x: f"{x:.2f}"))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,786 @@
+"""Procedural individual plants (tomato, maize) and their next monitoring session.
+
+A plant is a small set of parametric organs evaluated at a plant *age* (days):
+
+* stems are tubes around a gently leaning, slightly curved axis, one tube per internode;
+* leaves are thin sheets (one sample layer) around a midrib curve that rises, droops toward the tip,
+  curls sideways and twists; the cross-section folds (V along the midrib) and cups or rolls
+  (a circular arc whose arc length equals the blade half-width, so the sampled area is honest);
+* tomato: two cotyledons on the hypocotyl, then compound true leaves in a spiral (petiole/rachis
+  tube, pairs of ovate leaflets and a terminal leaflet); maize: a pseudo-stem of sheaths and long
+  strap leaves alternating on two opposite sides, the youngest one upright and rolled.
+
+Every organ grows with its own age (``1 - exp(-(a/T)^2)``: a slow start, a fast middle, a plateau),
+leaves flatten as they mature and move a little (a slow oscillation of their elevation, like the
+nastic movements seen between scans), and the stem lean drifts. A session pair evaluates the *same*
+material samples ``(s, t)`` of every organ at two ages, so the ground-truth correspondence is exact
+and the deformation is smooth and non-rigid; leaves that emerge in between have no correspondence.
+
+Units: metres in a plant-local frame (stem base at the origin, +Z up) at the real scale of the
+Pheno4D seedlings (tomato ~5 cm across, maize ~9 cm tall); callers rescale (SPEC: largest side
+0.24 m). Samples are stratified (a jittered grid, one row per ``spacing`` of arc length, as many
+samples across a row as its width needs), so the density is uniform per area and a 2 mm voxel grid
+at the normalised scale sees a closed sheet. Deterministic: the plant is a function of
+``(species, seed, stage, params)``.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from tpvp.errors import ConfigError
+from tpvp.io import atomic_write_text, write_point_cloud
+
+SPECIES = ("tomato", "maize")
+_SPECIES_CODE = {"tomato": 1, "maize": 2}
+_DEG = np.pi / 180.0
+_CURVE_NODES = 65
+_MAX_LEAVES = 24
+_G_VISIBLE = 0.06  # a leaf is generated once it has reached 6% of its final length
+
+# Default sample spacing: ``_DEFAULT_SPACING`` m for a plant whose skeleton spans ``_NOMINAL_EXTENT``
+# m, proportionally more or less for larger or smaller plants, so that after normalising to a 0.24 m
+# largest side the spacing is always ~0.4 mm (about 5 samples per 2 mm voxel edge).
+_DEFAULT_SPACING = {"tomato": 0.9e-4, "maize": 1.3e-4}
+_NOMINAL_EXTENT = {"tomato": 0.05, "maize": 0.09}
+# Extra age (days) drawn per seed at stage 1: the variety of development stages.
+_DEFAULT_DEVELOPMENT = {"tomato": (0.0, 8.0), "maize": (0.0, 4.0)}
+_BASE_AGE = {"tomato": 10.0, "maize": 11.0}
+# Plant-days (the generator's developmental clock) per calendar day between sessions: calibrated so
+# that 1-3 days move the leaves by a few mm to ~2 cm at the real scale.
+_CLOCK = {"tomato": 0.6, "maize": 0.35}
+
+
+# --------------------------------------------------------------------------------------------------
+# public data types
+# --------------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class PlantParams:
+    """Knobs of the generator (defaults give Pheno4D-like seedlings).
+
+    spacing: sample spacing in metres at the generated scale (None: proportional to the plant's
+        size, ~0.1 mm for a Pheno4D-sized seedling, ~0.4 mm after normalising to 0.24 m).
+    development: range (days) of the extra age drawn per seed at ``stage`` 1 (None: species
+        default); wider ranges give more varied plants (more, larger true leaves).
+    size: overall scale factor of the plant.
+    growth_rate: speed of growth and movement between sessions (1 = calibrated default).
+    leaf_motion: scale of the leaves' elevation oscillation and of the stem-lean drift.
+    new_leaf: in a session pair, make sure at least one leaf emerges between the sessions.
+    azimuth_deg: direction of the plant's main horizontal axis (the cotyledons of a tomato, the
+        leaf plane of a maize), +-8 degrees per seed; None: uniformly random per seed.
+    """
+
+    spacing: float | None = None
+    development: tuple[float, float] | None = None
+    size: float = 1.0
+    growth_rate: float = 1.0
+    leaf_motion: float = 1.0
+    new_leaf: bool = True
+    azimuth_deg: float | None = 0.0
+
+    def __post_init__(self):
+        if self.spacing is not None and not (np.isfinite(self.spacing) and self.spacing > 0):
+            raise ConfigError(f"PlantParams.spacing must be a positive length in metres, got {self.spacing!r}")
+        if self.development is not None:
+            dev = tuple(self.development)
+            if len(dev) != 2 or not all(np.isfinite(dev)) or dev[0] < 0 or dev[1] < dev[0]:
+                raise ConfigError(
+                    f"PlantParams.development must be a (low, high) range of days with 0 <= low <= high, "
+                    f"got {self.development!r}")
+        for name in ("size", "growth_rate"):
+            v = getattr(self, name)
+            if not (np.isfinite(v) and v > 0):
+                raise ConfigError(f"PlantParams.{name} must be > 0, got {v!r}")
+        if self.azimuth_deg is not None and not np.isfinite(self.azimuth_deg):
+            raise ConfigError(f"PlantParams.azimuth_deg must be finite or None, got {self.azimuth_deg!r}")
+        if not (np.isfinite(self.leaf_motion) and self.leaf_motion >= 0):
+            raise ConfigError(f"PlantParams.leaf_motion must be >= 0, got {self.leaf_motion!r}")
+
+
+@dataclass(frozen=True)
+class PlantSample:
+    """One plant at one moment.
+
+    points: (N, 3) float64, metres, stem base at the origin, +Z up.
+    organ: (N,) int32, 0 = stem, 1.. = leaf (bottom to top; tomato: 1-2 are the cotyledons).
+    part: (N,) int32, index into ``part_kinds`` (each internode, petiole/rachis, blade or leaflet is
+        one part; handy to pick a single leaflet).
+    part_kinds: kind of every part: "stem", "petiole" or "blade".
+    part_organs: organ of every part.
+    age: plant age in days (what ``stage`` maps to for this seed).
+    """
+
+    points: np.ndarray
+    organ: np.ndarray
+    part: np.ndarray
+    part_kinds: tuple[str, ...]
+    part_organs: tuple[int, ...]
+    species: str
+    seed: int
+    stage: float
+    age: float
+    leaf_count: int
+    spacing: float
+    params: PlantParams = field(default_factory=PlantParams)
+
+    def __len__(self) -> int:
+        return len(self.points)
+
+    def organ_points(self, organ: int) -> np.ndarray:
+        return self.points[self.organ == organ]
+
+
+@dataclass(frozen=True)
+class SessionPair:
+    """Two sessions of one plant with ground-truth correspondences.
+
+    ``previous.points[correspondence_previous_idx[k]]`` and ``current.points[correspondence_current_idx[k]]``
+    are the same material point. Every previous point has a partner; current points on organs that
+    emerged in between (``new_organs``) or on new internodes have none.
+    """
+
+    previous: PlantSample
+    current: PlantSample
+    correspondence_previous_idx: np.ndarray
+    correspondence_current_idx: np.ndarray
+    days: float
+    new_organs: tuple[int, ...]
+
+    @property
+    def displacement(self) -> np.ndarray:
+        """(K, 3) motion of every corresponded material point from previous to current (m)."""
+        return (self.current.points[self.correspondence_current_idx]
+                - self.previous.points[self.correspondence_previous_idx])
+
+
+# --------------------------------------------------------------------------------------------------
+# geometry primitives
+# --------------------------------------------------------------------------------------------------
+
+
+def _g(age, T):
+    """Relative size of an organ of age ``age`` days and growth time ``T``: 1 - exp(-(a/T)^2)."""
+    a = np.maximum(np.asarray(age, dtype=np.float64), 0.0)
+    return 1.0 - np.exp(-((a / T) ** 2))
+
+
+def _age_visible(T):
+    """Age at which an organ with growth time T reaches the visibility threshold."""
+    return T * np.sqrt(-np.log(1.0 - _G_VISIBLE))
+
+
+def _smoothstep(a, b, x):
+    u = np.clip((x - a) / (b - a), 0.0, 1.0)
+    return u * u * (3 - 2 * u)
+
+
+def _beta_profile(s, a, b):
+    """s^a (1-s)^b normalised to a maximum of 1 (a blade outline)."""
+    s = np.clip(s, 0.0, 1.0)
+    m = a / (a + b)
+    return (s**a) * ((1 - s) ** b) / ((m**a) * ((1 - m) ** b))
+
+
+class _Curve:
+    """An arc-length parameterised 3D curve with a frame, on normalised parameter s in [0, 1].
+
+    Direction from azimuth ``phi(s)`` and elevation ``theta(s)`` (arrays on the node grid); the
+    lateral vector B is horizontal, N = T x B points 'up' out of the blade, ``psi(s)`` twists B, N
+    about T.
+    """
+
+    def __init__(self, p0, length, phi, theta, psi=None):
+        self.length = float(length)
+        s = np.linspace(0.0, 1.0, _CURVE_NODES)
+        ct, st = np.cos(theta), np.sin(theta)
+        cp, sp = np.cos(phi), np.sin(phi)
+        T = np.stack([ct * cp, ct * sp, st], axis=1)
+        B = np.stack([-sp, cp, np.zeros_like(sp)], axis=1)
+        N = np.stack([-st * cp, -st * sp, ct], axis=1)
+        if psi is not None:
+            c, sn = np.cos(psi)[:, None], np.sin(psi)[:, None]
+            B, N = c * B + sn * N, -sn * B + c * N
+        ds = np.diff(s)[:, None]
+        steps = 0.5 * (T[1:] + T[:-1]) * ds * self.length
+        self.pos = np.asarray(p0, dtype=np.float64)[None, :] + np.vstack([np.zeros((1, 3)), np.cumsum(steps, axis=0)])
+        self.T, self.B, self.N = T, B, N
+
+    def at(self, s):
+        s = np.clip(np.asarray(s, dtype=np.float64), 0.0, 1.0)
+        x = s * (_CURVE_NODES - 1)
+        i = np.minimum(np.floor(x).astype(np.int64), _CURVE_NODES - 2)
+        w = (x - i)[:, None]
+
+        def lerp(a):
+            return a[i] * (1 - w) + a[i + 1] * w
+
+        def unit(v):
+            return v / np.linalg.norm(v, axis=1, keepdims=True)
+
+        return lerp(self.pos), unit(lerp(self.T)), unit(lerp(self.B)), unit(lerp(self.N))
+
+    def point(self, s):
+        p, T, B, N = self.at(np.array([s]))
+        return p[0], T[0], B[0], N[0]
+
+
+class _Tube:
+    """Tube of radius ``radius(s)`` around the sub-range [s0, s1] of a curve (t = angle / 2 pi)."""
+
+    kind = "tube"
+
+    def __init__(self, curve, s0, s1, radius):
+        self.curve, self.s0, self.s1, self._radius = curve, s0, s1, radius
+        self.length = (s1 - s0) * curve.length
+
+    def radius(self, f):
+        return self._radius(self.s0 + np.asarray(f) * (self.s1 - self.s0))
+
+    def max_radius(self):
+        return float(np.max(self.radius(np.linspace(0, 1, 9))))
+
+    def eval(self, f, t):
+        p, _, B, N = self.curve.at(self.s0 + f * (self.s1 - self.s0))
+        a = 2 * np.pi * t
+        r = self.radius(f)[:, None]
+        return p + r * (np.cos(a)[:, None] * B + np.sin(a)[:, None] * N)
+
+
+class _Blade:
+    """Thin sheet around a midrib curve.
+
+    halfwidth(s) = hw * profile(s). Cross-section at s: a curve of arc length |l| = |t| hw(s) whose
+    angle to B starts at ``fold(s)`` (margins raised: a V) and bends by ``roll(s)`` radians per
+    half-width (a cup or a roll), plus a small margin wave along N.
+    """
+
+    kind = "blade"
+
+    def __init__(self, curve, hw, profile, fold=(0.0, 0.0), roll=lambda s: 0.0 * s, wave=(0.0, 0.0, 0.0)):
+        self.curve, self.hw, self.profile = curve, float(hw), profile
+        self.length = curve.length
+        self.fold, self.roll, self.wave = fold, roll, wave
+
+    def halfwidth(self, s):
+        return self.hw * self.profile(np.asarray(s, dtype=np.float64))
+
+    def eval(self, s, t):
+        p, _, B, N = self.curve.at(s)
+        hw = self.halfwidth(s)
+        u = np.abs(t) * hw
+        f = self.fold[0] + (self.fold[1] - self.fold[0]) * s
+        rho = self.roll(s)  # total bend over the half-width (rad)
+        c = rho / np.maximum(hw, 1e-9)
+        c = np.where(np.abs(c) < 1e-3, 1e-3, c)
+        lat = (np.sin(f + c * u) - np.sin(f)) / c
+        up = (np.cos(f) - np.cos(f + c * u)) / c
+        amp, k, ph = self.wave
+        if amp:
+            up = up + amp * np.abs(t) ** 3 * np.sin(2 * np.pi * k * s + ph)
+        return p + (np.sign(t) * lat)[:, None] * B + up[:, None] * N
+
+
+@dataclass
+class _Part:
+    key: tuple
+    organ: int
+    kind: str  # "stem", "petiole", "blade"
+    geom: object
+
+
+# --------------------------------------------------------------------------------------------------
+# species
+# --------------------------------------------------------------------------------------------------
+
+
+def _check_species(species) -> str:
+    if not isinstance(species, str) or species.lower() not in SPECIES:
+        raise ConfigError(f"unknown species {species!r}; choose one of {', '.join(SPECIES)}")
+    return species.lower()
+
+
+def _check_seed(seed) -> int:
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise ConfigError(f"seed must be a non-negative integer, got {seed!r}")
+    return int(seed)
+
+
+def _check_stage(stage) -> float:
+    try:
+        stage = float(stage)
+    except (TypeError, ValueError):
+        raise ConfigError(f"stage must be a number, got {stage!r}") from None
+    if not np.isfinite(stage) or not (0.3 <= stage <= 3.0):
+        raise ConfigError(f"stage must lie in [0.3, 3] (1 = a Pheno4D-like seedling), got {stage!r}")
+    return stage
+
+
+class _Spec(dict):
+    """Per-seed constants of one plant (attribute access)."""
+
+    def __getattr__(self, name):
+        try:
+            return self[name]
+        except KeyError:
+            raise AttributeError(name) from None
+
+    __setattr__ = dict.__setitem__
+
+
+def _main_azimuth(rng, params: PlantParams) -> float:
+    jitter = rng.normal(0, 8) * _DEG
+    if params.azimuth_deg is None:
+        return rng.uniform(0, 2 * np.pi) + jitter
+    return params.azimuth_deg * _DEG + jitter
+
+
+def _tomato_spec(seed: int, params: PlantParams) -> _Spec:
+    rng = np.random.default_rng([seed, _SPECIES_CODE["tomato"]])
+    u = rng.uniform
+    n = _MAX_LEAVES
+    dev = params.development or _DEFAULT_DEVELOPMENT["tomato"]
+    sp = _Spec()
+    sp.age1 = _BASE_AGE["tomato"] + u(*dev)
+    # stem (hypocotyl, then one epicotyl internode under each true leaf)
+    sp.hyp_len = u(0.016, 0.022)
+    sp.r0 = u(0.00075, 0.00095)
+    sp.beta0 = u(5, 18) * _DEG
+    sp.beta1 = u(-8, 8) * _DEG
+    sp.gamma0 = u(0, 2 * np.pi)
+    sp.gamma1 = u(-20, 20) * _DEG
+    sp.beta_amp, sp.beta_per, sp.beta_ph = u(1.5, 3.0) * _DEG, u(5, 9), u(0, 2 * np.pi)
+    sp.int_len = u(0.0015, 0.003, n) * (1 + 0.15 * np.arange(n))
+    # cotyledons
+    phc = _main_azimuth(rng, params)
+    sp.cot_phi = phc + np.array([0.0, np.pi]) + rng.normal(0, 0.1, 2)
+    sp.cot_len = u(0.020, 0.025) * (1 + rng.normal(0, 0.04, 2))
+    sp.cot_wr = u(0.34, 0.44, 2)
+    sp.cot_theta = u(0, 25, 2) * _DEG
+    sp.cot_droop = u(5, 35, 2) * _DEG
+    sp.cot_curl = rng.normal(0, 8, 2) * _DEG
+    sp.cot_twist = rng.normal(0, 12, 2) * _DEG
+    sp.cot_bank = rng.normal(0, 12, 2) * _DEG
+    sp.cot_cup = rng.normal(0, 0.35, 2)
+    sp.cot_osc = (u(3, 6, 2) * _DEG, u(4, 8, 2), u(0, 2 * np.pi, 2))
+    # true leaves: emergence, spiral phyllotaxis, size, posture
+    sp.leaf_T = 9.0
+    sp.leaf_e = u(7.5, 9.0) + np.concatenate([[0.0], np.cumsum(u(2.4, 3.4, n - 1))])
+    turn = 137.5 * _DEG * (1 if rng.uniform() < 0.5 else -1)
+    sp.leaf_phi = phc + (np.pi / 2) * (1 if rng.uniform() < 0.5 else -1) + turn * np.arange(n) \
+        + rng.normal(0, 12, n) * _DEG
+    sp.rachis = u(0.030, 0.040, n) * np.minimum(1 + 0.25 * np.arange(n), 2.5)
+    sp.rachis_r = u(0.00028, 0.00038)
+    sp.theta_young = u(45, 60, n) * _DEG
+    sp.theta_mature = u(10, 30, n) * _DEG
+    sp.rachis_droop = u(25, 50, n) * _DEG
+    sp.rachis_curl = rng.normal(0, 10, n) * _DEG
+    sp.n_pairs = np.minimum(2 + (np.arange(n) >= 1) + (u(0, 1, n) < 0.4), 4).astype(int)
+    sp.leaf_osc = (u(4, 8, n) * _DEG, u(4, 8, n), u(0, 2 * np.pi, n))
+    m = 2 * n * 4 + n  # leaflet draws per plant (per leaf: up to 4 pairs x 2 sides + terminal)
+    sp.lf_angle = u(50, 75, m) * _DEG
+    sp.lf_tilt = u(-15, 5, m) * _DEG
+    sp.lf_wr = u(0.55, 0.70, m)
+    sp.lf_droop = u(10, 40, m) * _DEG
+    sp.lf_curl = rng.normal(0, 10, m) * _DEG
+    sp.lf_twist = rng.normal(0, 12, m) * _DEG
+    sp.lf_cup = rng.normal(0.15, 0.3, m)
+    sp.lf_scale = u(0.85, 1.15, m)
+    return sp
+
+
+def _tomato_parts(sp: _Spec, age: float, motion: float, size: float) -> list[_Part]:
+    parts: list[_Part] = []
+    T = sp.leaf_T
+    ages = age - sp.leaf_e
+    g = _g(ages, T)
+    n_true = int(np.sum(ages > _age_visible(T)))
+    # ---- stem -------------------------------------------------------------------------------------
+    internodes = [sp.hyp_len * (0.45 + 0.55 * float(_g(age, 5.0)))]
+    internodes += [sp.int_len[i] * float(_g(ages[i] + 1.0, 7.0)) for i in range(n_true)]
+    internodes = np.array(internodes) * size
+    total = internodes.sum()
+    sig = np.linspace(0, 1, _CURVE_NODES) * total
+    ref = 0.025 * size
+    beta = sp.beta0 + motion * sp.beta_amp * np.sin(2 * np.pi * age / sp.beta_per + sp.beta_ph) \
+        + sp.beta1 * sig / ref
+    gamma = sp.gamma0 + sp.gamma1 * sig / ref
+    stem = _Curve(np.zeros(3), total, gamma, np.pi / 2 - beta)
+    thick = 0.8 + 0.2 * float(_g(age, 8.0))
+
+    def stem_r(s, total=total):
+        return size * sp.r0 * thick * (1 - 0.3 * np.minimum(np.asarray(s) * total / (0.03 * size), 1.0))
+
+    nodes = np.concatenate([[0.0], np.cumsum(internodes)]) / total
+    for j in range(len(internodes)):
+        parts.append(_Part((0, j), 0, "stem", _Tube(stem, nodes[j], nodes[j + 1], stem_r)))
+
+    def base_point(s_node, phi):
+        p = stem.point(s_node)[0]
+        r = float(stem_r(np.array([s_node]))[0])
+        return p + 0.8 * r * np.array([np.cos(phi), np.sin(phi), 0.0])
+
+    # ---- cotyledons ---------------------------------------------------------------------------------
+    cot_g = 0.35 + 0.65 * float(_g(age, 4.0))
+    amp, per, ph = sp.cot_osc
+    for k in range(2):
+        L = sp.cot_len[k] * cot_g * size
+        th0 = sp.cot_theta[k] + motion * amp[k] * np.sin(2 * np.pi * age / per[k] + ph[k])
+        s = np.linspace(0, 1, _CURVE_NODES)
+        curve = _Curve(base_point(nodes[1], sp.cot_phi[k]), L, sp.cot_phi[k] + sp.cot_curl[k] * s,
+                       th0 - sp.cot_droop[k] * s**1.3, sp.cot_bank[k] + sp.cot_twist[k] * s)
+        pet_hw = 0.0007 / (L * sp.cot_wr[k] / 2)
+
+        def cot_profile(s, pet=pet_hw):
+            u = np.clip((s - 0.12) / 0.88, 0, 1)
+            blade = _beta_profile(u, 0.75, 0.7)
+            return np.maximum(blade, pet * (1 - _smoothstep(0.1, 0.3, s)))
+
+        cup = sp.cot_cup[k]
+        parts.append(_Part((1, k), k + 1, "blade",
+                           _Blade(curve, L * sp.cot_wr[k] / 2, cot_profile, roll=lambda s, c=cup: c + 0 * s)))
+    # ---- compound true leaves -------------------------------------------------------------------------
+    amp, per, ph = sp.leaf_osc
+    for i in range(n_true):
+        a, gi = ages[i], float(g[i])
+        organ = 3 + i
+        R = sp.rachis[i] * gi * size
+        th0 = sp.theta_mature[i] + (sp.theta_young[i] - sp.theta_mature[i]) * np.exp(-a / 4.0) \
+            + motion * amp[i] * np.sin(2 * np.pi * age / per[i] + ph[i])
+        s = np.linspace(0, 1, _CURVE_NODES)
+        rachis = _Curve(base_point(nodes[i + 2], sp.leaf_phi[i]), R, sp.leaf_phi[i] + sp.rachis_curl[i] * s,
+                        th0 - sp.rachis_droop[i] * gi * s**1.5)
+        rr = size * sp.rachis_r * (0.5 + 0.5 * gi)
+        parts.append(_Part((2, i, 0), organ, "petiole",
+                           _Tube(rachis, 0.0, 1.0, lambda s, rr=rr: rr * (1 - 0.4 * np.asarray(s)))))
+        npair = int(sp.n_pairs[i])
+        pos = [0.6] if npair == 1 else list(0.38 + 0.45 * np.arange(npair) / (npair - 1))
+        leaflets = []  # (attach s, side, relative length)
+        for j, sj in enumerate(pos):
+            rel = 0.45 + 0.15 * j / max(npair - 1, 1)
+            leaflets += [(sj, -1, rel), (sj, +1, rel)]
+        leaflets.append((1.0, 0, 0.75))
+        lat_g = gi ** 0.3  # lateral leaflets lag the terminal one a little
+        for q, (sj, side, rel) in enumerate(leaflets):
+            d = i * (2 * 4 + 1) + q
+            p, Tr, Br, Nr = rachis.point(sj)
+            if side == 0:
+                d0 = Tr
+                Ll = sp.rachis[i] * size * rel * sp.lf_scale[d] * gi
+            else:
+                d0 = np.cos(sp.lf_angle[d]) * Tr + side * np.sin(sp.lf_angle[d]) * Br
+                d0 = d0 + np.tan(sp.lf_tilt[d]) * Nr
+                Ll = sp.rachis[i] * size * rel * sp.lf_scale[d] * gi * lat_g
+            d0 = d0 / np.linalg.norm(d0)
+            phi0, th0l = np.arctan2(d0[1], d0[0]), np.arcsin(np.clip(d0[2], -1, 1))
+            sd = side if side else 1
+            curve = _Curve(p, Ll, phi0 + sd * sp.lf_curl[d] * s, th0l - sp.lf_droop[d] * gi * s**1.4,
+                           sd * sp.lf_twist[d] * s)
+            cup = sp.lf_cup[d]
+            parts.append(_Part((2, i, 1 + q), organ, "blade",
+                               _Blade(curve, Ll * sp.lf_wr[d] / 2, lambda s: _beta_profile(s, 0.5, 0.9),
+                                      roll=lambda s, c=cup: c + 0 * s)))
+    return parts
+
+
+def _maize_spec(seed: int, params: PlantParams) -> _Spec:
+    rng = np.random.default_rng([seed, _SPECIES_CODE["maize"]])
+    u = rng.uniform
+    n = _MAX_LEAVES
+    dev = params.development or _DEFAULT_DEVELOPMENT["maize"]
+    sp = _Spec()
+    sp.age1 = _BASE_AGE["maize"] + u(*dev)
+    idx = np.arange(n)
+    sp.leaf_T = 5.5 + 0.8 * idx
+    sp.leaf_e = np.concatenate([[0.0], np.cumsum(u(2.2, 3.0, n - 1))])
+    sp.blade_len = u(0.032, 0.040) * (1 + 0.55 * idx) * u(0.9, 1.1, n)
+    sp.width_ratio = np.where(idx == 0, u(0.24, 0.30), u(0.21, 0.27, n) * np.maximum(1 - 0.06 * (idx - 1), 0.7))
+    sp.tip_exp = np.where(idx == 0, 4.0, 2.0)
+    sp.sheath = u(0.013, 0.017) * (1 + 0.5 * idx) * u(0.9, 1.1, n)  # internode under each collar
+    sp.r0 = u(0.0014, 0.0019)
+    sp.beta0 = u(0, 6) * _DEG
+    sp.beta1 = u(-4, 4) * _DEG
+    sp.gamma0 = u(0, 2 * np.pi)
+    sp.beta_amp, sp.beta_per, sp.beta_ph = u(1.0, 2.0) * _DEG, u(5, 9), u(0, 2 * np.pi)
+    phi0 = _main_azimuth(rng, params)
+    sp.leaf_phi = phi0 + np.pi * idx + rng.normal(0, 35, n) * _DEG
+    sp.theta_mature = u(60, 78, n) * _DEG
+    sp.theta_young = u(84, 89, n) * _DEG
+    sp.droop = u(35, 100, n) * _DEG
+    sp.droop_exp = u(1.4, 2.2, n)
+    sp.curl = rng.normal(0, 35, n) * _DEG
+    sp.twist = rng.normal(0, 25, n) * _DEG
+    sp.fold = u(8, 22, n) * _DEG
+    sp.wave = (u(0.0002, 0.0005, n), u(6, 12, n), u(0, 2 * np.pi, n))
+    sp.leaf_osc = (u(3, 6, n) * _DEG, u(4, 8, n), u(0, 2 * np.pi, n))
+    return sp
+
+
+def _maize_parts(sp: _Spec, age: float, motion: float, size: float) -> list[_Part]:
+    parts: list[_Part] = []
+    ages = age - sp.leaf_e
+    vis = ages > _age_visible(sp.leaf_T)
+    n = int(np.sum(vis))
+    g = _g(ages, sp.leaf_T)
+    # pseudo-stem: one internode (sheath segment) under each visible collar
+    internodes = np.array([sp.sheath[i] * float(g[i]) ** 1.5 for i in range(n)]) * size
+    internodes = np.maximum(internodes, 1e-5 * size)
+    total = internodes.sum()
+    sig = np.linspace(0, 1, _CURVE_NODES) * total
+    ref = 0.05 * size
+    beta = sp.beta0 + motion * sp.beta_amp * np.sin(2 * np.pi * age / sp.beta_per + sp.beta_ph) \
+        + sp.beta1 * sig / ref
+    stem = _Curve(np.zeros(3), total, sp.gamma0 + 0 * sig, np.pi / 2 - beta)
+    thick = 0.6 + 0.4 * float(_g(age, 10.0))
+
+    def stem_r(s, total=total):
+        return size * sp.r0 * thick * (1 - 0.3 * np.asarray(s) * min(total / ref, 1.0))
+
+    nodes = np.concatenate([[0.0], np.cumsum(internodes)]) / total
+    for j in range(n):
+        parts.append(_Part((0, j), 0, "stem", _Tube(stem, nodes[j], nodes[j + 1], stem_r)))
+    amp, per, ph = sp.leaf_osc
+    s = np.linspace(0, 1, _CURVE_NODES)
+    for i in range(n):
+        a, gi = ages[i], float(g[i])
+        L = sp.blade_len[i] * gi * size
+        hw = sp.blade_len[i] * sp.width_ratio[i] / 2 * gi ** 0.8 * size
+        young = np.exp(-a / 3.0)
+        th0 = sp.theta_mature[i] + (sp.theta_young[i] - sp.theta_mature[i]) * young \
+            + motion * amp[i] * np.sin(2 * np.pi * age / per[i] + ph[i])
+        theta = th0 - sp.droop[i] * gi**2 * s ** sp.droop_exp[i]
+        phi = sp.leaf_phi[i]
+        sn = nodes[i + 1]
+        r = float(stem_r(np.array([sn]))[0])
+        base = stem.point(sn)[0] + 0.9 * r * np.array([np.cos(phi), np.sin(phi), 0.0])
+        curve = _Curve(base, L, phi + sp.curl[i] * s, theta, sp.twist[i] * s**1.5)
+        tip = sp.tip_exp[i]
+
+        def profile(s, tip=tip):
+            return (0.55 + 0.45 * _smoothstep(0.0, 0.3, s)) * np.clip(1 - s**tip, 0, 1) ** 0.6
+
+        # a young leaf is rolled (almost a cone); every blade wraps round the stem at its base
+        rolled = 2.3 * young
+        wrap = min(np.pi * r / max(hw, 1e-9), 2.5)
+
+        def roll(s, rolled=rolled, wrap=wrap):
+            return rolled + wrap * np.exp(-np.asarray(s) / 0.05)
+
+        fold = (sp.fold[i] * 1.2, sp.fold[i] * 0.4)
+        wave = (sp.wave[0][i] * gi * size, sp.wave[1][i], sp.wave[2][i])
+        parts.append(_Part((1, i), i + 1, "blade", _Blade(curve, hw, profile, fold, roll, wave)))
+    return parts
+
+
+_SPEC = {"tomato": _tomato_spec, "maize": _maize_spec}
+_PARTS = {"tomato": _tomato_parts, "maize": _maize_parts}
+
+
+def _first_hidden_leaf(species: str, sp: _Spec, age: float) -> int | None:
+    ages = age - sp.leaf_e
+    hidden = np.nonzero(ages <= _age_visible(sp.leaf_T))[0]
+    return int(hidden[0]) if len(hidden) else None
+
+
+# --------------------------------------------------------------------------------------------------
+# sampling
+# --------------------------------------------------------------------------------------------------
+
+
+def _sample_uv(geoms, h: float, rng) -> tuple[np.ndarray, np.ndarray]:
+    """Stratified samples (s, t) of one part, dense enough for every geometry in ``geoms``.
+
+    Rows every ``h`` of arc length (largest length over the geometries), each with as many jittered
+    samples as the widest geometry needs at that row.
+    """
+    g0 = geoms[0]
+    L = max(g.length for g in geoms)
+    n_rows = max(int(np.ceil(L / h)), 2)
+    s = (np.arange(n_rows) + 0.5 + rng.uniform(-0.4, 0.4, n_rows)) / n_rows
+    if g0.kind == "tube":
+        circ = 2 * np.pi * max(g.max_radius() for g in geoms)
+        n_i = np.full(n_rows, max(int(np.ceil(circ / h)), 6))
+    else:
+        width = 2 * np.max([g.halfwidth(s) for g in geoms], axis=0)
+        width = width * 1.05  # cupped / folded cross-sections are slightly longer than their chord
+        n_i = np.maximum(np.ceil(width / h).astype(np.int64), 1)
+    row = np.repeat(np.arange(n_rows), n_i)
+    k = np.arange(row.size) - np.repeat(np.cumsum(n_i) - n_i, n_i)
+    t = (k + 0.5 + rng.uniform(-0.4, 0.4, row.size)) / n_i[row]
+    if g0.kind != "tube":  # tubes: angle fraction in [0, 1); blades: signed lateral fraction
+        t = 2 * t - 1
+    return s[row], t
+
+
+def _part_rng(seed: int, species: str, key: tuple):
+    return np.random.default_rng([seed, _SPECIES_CODE[species], 7919, *key])
+
+
+def _assemble(species, seed, stage, age, params, spacing, parts, uv):
+    pts, organ, part_ids, kinds, organs = [], [], [], [], []
+    for pid, p in enumerate(parts):
+        s, t = uv[p.key]
+        pts.append(p.geom.eval(s, t))
+        organ.append(np.full(len(s), p.organ, np.int32))
+        part_ids.append(np.full(len(s), pid, np.int32))
+        kinds.append(p.kind)
+        organs.append(p.organ)
+    leaf_count = len({p.organ for p in parts if p.organ > 0})
+    return PlantSample(points=np.ascontiguousarray(np.concatenate(pts)), organ=np.concatenate(organ),
+                       part=np.concatenate(part_ids), part_kinds=tuple(kinds), part_organs=tuple(organs),
+                       species=species, seed=seed, stage=stage, age=float(age), leaf_count=leaf_count,
+                       spacing=spacing, params=params)
+
+
+def _setup(species, seed, stage, params):
+    species = _check_species(species)
+    seed = _check_seed(seed)
+    stage = _check_stage(stage)
+    if params is None:
+        params = PlantParams()
+    elif not isinstance(params, PlantParams):
+        raise ConfigError(f"params must be a PlantParams, got {type(params).__name__}")
+    sp = _SPEC[species](seed, params)
+    return species, seed, stage, params, sp
+
+
+def _spacing(species: str, params: PlantParams, parts: list[_Part]) -> float:
+    if params.spacing is not None:
+        return float(params.spacing)
+    nodes = np.concatenate([p.geom.curve.pos for p in parts])
+    extent = max(float(np.ptp(nodes, axis=0).max()), 1e-3)
+    return _DEFAULT_SPACING[species] * extent / _NOMINAL_EXTENT[species]
+
+
+# --------------------------------------------------------------------------------------------------
+# public functions
+# --------------------------------------------------------------------------------------------------
+
+
+def generate_plant(species: str, seed: int, stage: float = 1.0, params: PlantParams | None = None) -> PlantSample:
+    """One procedural plant ("tomato" or "maize"), deterministic in ``(species, seed, stage, params)``.
+
+    ``stage`` scales the plant's age (1 = a Pheno4D-like seedling; 0.3 to 3 allowed): older plants
+    have more and larger leaves. Points are in metres, stem base at the origin, +Z up.
+    """
+    species, seed, stage, params, sp = _setup(species, seed, stage, params)
+    age = stage * sp.age1
+    parts = _PARTS[species](sp, age, params.leaf_motion, params.size)
+    spacing = _spacing(species, params, parts)
+    uv = {p.key: _sample_uv([p.geom], spacing, _part_rng(seed, species, p.key)) for p in parts}
+    return _assemble(species, seed, stage, age, params, spacing, parts, uv)
+
+
+def generate_session_pair(species: str, seed: int, days: float = 2.0, stage: float = 1.0,
+                          params: PlantParams | None = None) -> SessionPair:
+    """The plant at ``stage`` (previous session) and ``days`` later (current session).
+
+    Both sessions evaluate the same material samples of every organ, so the correspondences are
+    exact; the current session is sampled densely enough for its (larger) organs, which makes the
+    previous one slightly denser. Leaves that emerge in between (at least one unless
+    ``params.new_leaf`` is False) and their internodes have no correspondence.
+    """
+    species, seed, stage, params, sp = _setup(species, seed, stage, params)
+    try:
+        days = float(days)
+    except (TypeError, ValueError):
+        raise ConfigError(f"days must be a number, got {days!r}") from None
+    if not np.isfinite(days) or days <= 0 or days > 7:
+        raise ConfigError(f"days between sessions must be in (0, 7], got {days!r}")
+    age_prev = stage * sp.age1
+    age_cur = age_prev + days * params.growth_rate * _CLOCK[species]
+    if params.new_leaf:
+        k = _first_hidden_leaf(species, sp, age_prev)
+        if k is not None:
+            T = np.asarray(sp.leaf_T) * np.ones(len(sp.leaf_e))
+            a_vis = _age_visible(T[k])
+            latest = age_prev - a_vis + 0.1 * (age_cur - age_prev)  # emerges just after the previous one
+            shift = sp.leaf_e[k] - latest
+            if shift > 0:
+                sp = _Spec(sp)
+                e = sp.leaf_e.copy()
+                e[k:] -= shift
+                sp.leaf_e = e
+    prev_parts = _PARTS[species](sp, age_prev, params.leaf_motion, params.size)
+    cur_parts = _PARTS[species](sp, age_cur, params.leaf_motion, params.size)
+    prev_by_key = {p.key: p for p in prev_parts}
+    spacing = _spacing(species, params, prev_parts + cur_parts)
+    if any(p.key not in {q.key for q in cur_parts} for p in prev_parts):  # pragma: no cover
+        raise AssertionError("an organ disappeared between sessions")
+    uv = {}
+    for p in cur_parts:
+        geoms = [p.geom] + ([prev_by_key[p.key].geom] if p.key in prev_by_key else [])
+        uv[p.key] = _sample_uv(geoms, spacing, _part_rng(seed, species, p.key))
+    # the previous session lists its parts in the current session's order
+    prev_parts = [prev_by_key[p.key] for p in cur_parts if p.key in prev_by_key]
+    previous = _assemble(species, seed, stage, age_prev, params, spacing, prev_parts, uv)
+    current = _assemble(species, seed, stage, age_cur, params, spacing, cur_parts, uv)
+    # correspondences: shared parts, in order
+    counts = {p.key: len(uv[p.key][0]) for p in cur_parts}
+    cur_start, off = {}, 0
+    for p in cur_parts:
+        cur_start[p.key] = off
+        off += counts[p.key]
+    prev_idx, cur_idx, off = [], [], 0
+    for p in prev_parts:
+        n = counts[p.key]
+        prev_idx.append(np.arange(off, off + n))
+        cur_idx.append(np.arange(cur_start[p.key], cur_start[p.key] + n))
+        off += n
+    new_organs = tuple(sorted({p.organ for p in cur_parts if p.key not in prev_by_key and p.organ > 0}))
+    return SessionPair(previous=previous, current=current,
+                       correspondence_previous_idx=np.concatenate(prev_idx).astype(np.int64),
+                       correspondence_current_idx=np.concatenate(cur_idx).astype(np.int64),
+                       days=days, new_organs=new_organs)
+
+
+def plant_summary(sample: PlantSample, largest_side: float = 0.24, voxel: float = 0.002) -> dict:
+    """Points, occupied voxels and bounding-box extent after scaling to ``largest_side`` (m)."""
+    from tpvp.scene.voxels import voxelise
+
+    pts = sample.points
+    ext = np.ptp(pts, axis=0)
+    scale = largest_side / ext.max()
+    lo = pts.min(axis=0)
+    scaled = (pts - 0.5 * (lo + pts.max(axis=0))) * scale
+    return {"points": len(pts), "voxels": len(voxelise(scaled, voxel)), "extent": ext * scale,
+            "raw_extent": ext, "leaves": sample.leaf_count}
+
+
+__all__ = ["SPECIES", "PlantParams", "PlantSample", "SessionPair", "generate_plant", "generate_session_pair",
+           "plant_summary"]
+
+
+def save_session_pair(pair: SessionPair, folder, name: str | None = None) -> Path:
+    """Write a pair as ``<name>_previous.ply``, ``<name>_current.ply`` (binary, metres, organ labels),
+    ``<name>_correspondences.csv`` (previous index, current index) and ``<name>_manifest.json``.
+
+    Every file is written atomically. Returns the manifest path.
+    """
+
+    name = name or f"{pair.current.species}_seed{pair.current.seed}"
+    folder = Path(folder)
+    files = {}
+    for role, sample in (("previous", pair.previous), ("current", pair.current)):
+        path = write_point_cloud(folder / f"{name}_{role}.ply", sample.points, labels=sample.organ)
+        files[role] = path.name
+    corr = np.stack([pair.correspondence_previous_idx, pair.correspondence_current_idx], axis=1)
+    corr_path = folder / f"{name}_correspondences.csv"
+    atomic_write_text(corr_path, "previous,current\n" + "\n".join(f"{a},{b}" for a, b in corr) + "\n")
+    manifest = {
+        "species": pair.current.species, "seed": pair.current.seed, "days": pair.days,
+        "units": "m", "frame": "stem base at the origin, +Z up",
+        "labels": "organ: 0 = stem, 1.. = leaves bottom to top",
+        "files": {**files, "correspondences": corr_path.name},
+        "points": {"previous": len(pair.previous), "current": len(pair.current)},
+        "leaves": {"previous": pair.previous.leaf_count, "current": pair.current.leaf_count},
+        "new_organs": list(pair.new_organs), "generator": "tpvp.scene.plants",
+    }
+    manifest_path = folder / f"{name}_manifest.json"
+    atomic_write_text(manifest_path, json.dumps(manifest, indent=2) + "\n")
+    return manifest_path
