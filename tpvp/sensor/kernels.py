@@ -141,12 +141,49 @@ def exposed_faces(keys, index, lo):
     return out
 
 
+_NEAR = 1e-6  # near plane (m) for clipping geometry that straddles the camera plane
+_CUBE_EDGES = np.array([[0, 1], [2, 3], [4, 5], [6, 7], [0, 2], [1, 3], [4, 6], [5, 7],
+                        [0, 4], [1, 5], [2, 6], [3, 7]], dtype=np.int64)
+_QUAD_EDGES = np.array([[0, 1], [1, 3], [3, 2], [2, 0]], dtype=np.int64)
+
+
+@njit(cache=True)
+def _clipped_bounds(cam, edges, fx, fy, cx, cy):
+    """Image bounds ``(umin, umax, vmin, vmax)`` of a convex solid/polygon given by its corners in
+    camera coordinates, clipped to the half-space in front of the camera (empty when all behind)."""
+    umin = np.inf
+    umax = -np.inf
+    vmin = np.inf
+    vmax = -np.inf
+    clipped = False
+    for q in range(cam.shape[0]):
+        if cam[q, 2] > _NEAR:
+            u = fx * cam[q, 0] / cam[q, 2] + cx
+            v = fy * cam[q, 1] / cam[q, 2] + cy
+            umin, umax, vmin, vmax = min(umin, u), max(umax, u), min(vmin, v), max(vmax, v)
+        else:
+            clipped = True
+    if not clipped:
+        return umin, umax, vmin, vmax
+    for e in range(edges.shape[0]):
+        a, b = edges[e, 0], edges[e, 1]
+        za, zb = cam[a, 2], cam[b, 2]
+        if (za > _NEAR) != (zb > _NEAR):
+            w = (_NEAR - za) / (zb - za)
+            x = cam[a, 0] + w * (cam[b, 0] - cam[a, 0])
+            y = cam[a, 1] + w * (cam[b, 1] - cam[a, 1])
+            u = fx * x / _NEAR + cx
+            v = fy * y / _NEAR + cy
+            umin, umax, vmin, vmax = min(umin, u), max(umax, u), min(vmin, v), max(vmax, v)
+    return umin, umax, vmin, vmax
+
+
 @njit(cache=True)
 def pixel_window(pos, rot, fx, fy, cx, cy, width, height, stride, centres, res):
     """Strided pixel rows/columns ``(row0, row1, col0, col1)`` (inclusive) that any voxel can cover.
 
-    Bounds each voxel by its circumscribed sphere; a voxel reaching behind the image plane makes the
-    window the whole image.
+    Bounds each voxel by its circumscribed sphere; a voxel that straddles the camera plane is
+    bounded exactly by its cube clipped to the front half-space.
     """
     rows = (height + stride - 1) // stride
     cols = (width + stride - 1) // stride
@@ -163,7 +200,16 @@ def pixel_window(pos, rot, fx, fy, cx, cy, width, height, stride, centres, res):
         if zc <= -radius:
             continue
         if zc <= radius + 1e-9:
-            return 0, rows - 1, 0, cols - 1
+            cam = np.empty((8, 3))
+            for q in range(8):
+                wx = centres[i, 0] - 0.5 * res + res * (q & 1) - pos[0]
+                wy = centres[i, 1] - 0.5 * res + res * ((q >> 1) & 1) - pos[1]
+                wz = centres[i, 2] - 0.5 * res + res * ((q >> 2) & 1) - pos[2]
+                for a in range(3):
+                    cam[q, a] = rot[0, a] * wx + rot[1, a] * wy + rot[2, a] * wz
+            a0, a1, b0, b1 = _clipped_bounds(cam, _CUBE_EDGES, fx, fy, cx, cy)
+            umin, umax, vmin, vmax = min(umin, a0), max(umax, a1), min(vmin, b0), max(vmax, b1)
+            continue
         u = fx * (rot[0, 0] * rx + rot[1, 0] * ry + rot[2, 0] * rz) / zc + cx
         v = fy * (rot[0, 1] * rx + rot[1, 1] * ry + rot[2, 1] * rz) / zc + cy
         # The sphere's projection: its centre's projection +- a radius scaled by the nearest depth,
@@ -175,10 +221,22 @@ def pixel_window(pos, rot, fx, fy, cx, cy, width, height, stride, centres, res):
         vmax = max(vmax, v + slack)
     if umin > umax:
         return 0, -1, 0, -1
-    c0 = max(0, np.int64(np.floor((umin - 2.0) / stride)))
-    c1 = min(cols - 1, np.int64(np.ceil((umax + 2.0) / stride)))
-    r0 = max(0, np.int64(np.floor((vmin - 2.0) / stride)))
-    r1 = min(rows - 1, np.int64(np.ceil((vmax + 2.0) / stride)))
+    return _pixel_range(umin, umax, vmin, vmax, stride, 2.0, rows, cols)
+
+
+@njit(cache=True, inline="always")
+def _pixel_range(umin, umax, vmin, vmax, stride, slack, rows, cols):
+    """Strided pixel indices inside the image bounds widened by ``slack`` pixels, clamped to the
+    image."""
+    # Clamp in float first: clipped geometry can project to astronomically large coordinates.
+    umin = min(max(umin - slack, -1.0), cols * stride + 1.0)
+    umax = min(max(umax + slack, -1.0), cols * stride + 1.0)
+    vmin = min(max(vmin - slack, -1.0), rows * stride + 1.0)
+    vmax = min(max(vmax + slack, -1.0), rows * stride + 1.0)
+    c0 = max(0, np.int64(np.ceil(umin / stride)))
+    c1 = min(cols - 1, np.int64(np.floor(umax / stride)))
+    r0 = max(0, np.int64(np.ceil(vmin / stride)))
+    r1 = min(rows - 1, np.int64(np.floor(vmax / stride)))
     return r0, r1, c0, c1
 
 
@@ -195,7 +253,7 @@ def pixel_view(pos, rot, fx, fy, cx, cy, stride, keys, exposed, res, row0, col0,
         for c in range(cols):
             depth[r, c] = np.inf
             hit[r, c] = MISS
-    corner = np.empty(3)
+    cam = np.empty((4, 3))
     for i in range(keys.shape[0]):
         mask = exposed[i]
         if mask == 0:
@@ -219,36 +277,37 @@ def pixel_view(pos, rot, fx, fy, cx, cy, stride, keys, exposed, res, row0, col0,
             b_hi = (keys[i, b] + 1) * res
             e_lo = keys[i, e] * res
             e_hi = (keys[i, e] + 1) * res
-            # Pixel bounding box of the projected face (one pixel of slack against rounding).
+            # Pixel bounding box of the projected face, clipped in front of the camera (one pixel
+            # of slack against rounding); faces entirely behind the camera are skipped.
+            # Corner (b_lo, e_lo) in camera coordinates, then step along the face's two axes.
+            w0 = plane - pos[a]
+            w1 = b_lo - pos[b]
+            w2 = e_lo - pos[e]
+            front = True
             umin = np.inf
             umax = -np.inf
             vmin = np.inf
             vmax = -np.inf
-            behind = False
             for q in range(4):
-                corner[a] = plane
-                corner[b] = b_lo if (q & 1) == 0 else b_hi
-                corner[e] = e_lo if (q & 2) == 0 else e_hi
-                rx = corner[0] - pos[0]
-                ry = corner[1] - pos[1]
-                rz = corner[2] - pos[2]
-                zc = rot[0, 2] * rx + rot[1, 2] * ry + rot[2, 2] * rz
-                if zc <= 1e-12:
-                    behind = True
-                    break
-                u = fx * (rot[0, 0] * rx + rot[1, 0] * ry + rot[2, 0] * rz) / zc + cx
-                v = fy * (rot[0, 1] * rx + rot[1, 1] * ry + rot[2, 1] * rz) / zc + cy
-                umin = min(umin, u)
-                umax = max(umax, u)
-                vmin = min(vmin, v)
-                vmax = max(vmax, v)
-            if behind:
-                c0, c1, r0, r1 = 0, cols - 1, 0, rows - 1  # face crosses the image plane: test all
-            else:
-                c0 = max(0, np.int64(np.ceil((umin - 1.0) / stride)) - col0)
-                c1 = min(cols - 1, np.int64(np.floor((umax + 1.0) / stride)) - col0)
-                r0 = max(0, np.int64(np.ceil((vmin - 1.0) / stride)) - row0)
-                r1 = min(rows - 1, np.int64(np.floor((vmax + 1.0) / stride)) - row0)
+                sb = res if (q & 1) else 0.0
+                se = res if (q & 2) else 0.0
+                for k in range(3):
+                    cam[q, k] = rot[a, k] * w0 + rot[b, k] * (w1 + sb) + rot[e, k] * (w2 + se)
+                if cam[q, 2] <= _NEAR:
+                    front = False
+                else:
+                    u = fx * cam[q, 0] / cam[q, 2] + cx
+                    v = fy * cam[q, 1] / cam[q, 2] + cy
+                    umin, umax, vmin, vmax = min(umin, u), max(umax, u), min(vmin, v), max(vmax, v)
+            if not front:  # rare: the face reaches behind the camera plane, clip it
+                umin, umax, vmin, vmax = _clipped_bounds(cam, _QUAD_EDGES, fx, fy, cx, cy)
+            if umin > umax:
+                continue
+            r0, r1, c0, c1 = _pixel_range(umin, umax, vmin, vmax, stride, 1.0, row0 + rows, col0 + cols)
+            r0 = max(r0 - row0, 0)
+            r1 -= row0
+            c0 = max(c0 - col0, 0)
+            c1 -= col0
             for r in range(r0, r1 + 1):
                 yn = ((r + row0) * stride - cy) / fy
                 for c in range(c0, c1 + 1):

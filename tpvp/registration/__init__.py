@@ -1,0 +1,12 @@
+"""Non-rigid registration of the previous session onto the current coarse reconstruction."""
+
+from tpvp.registration.embedded_deformation import (
+    EDConfig,
+    RegistrationResult,
+    axis_angle_to_matrix,
+    register_embedded_deformation,
+    voxel_centroids,
+)
+
+__all__ = ["EDConfig", "RegistrationResult", "axis_angle_to_matrix", "register_embedded_deformation",
+           "voxel_centroids"]

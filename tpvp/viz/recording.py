@@ -1,0 +1,46 @@
+"""Rerun recordings (``.rrd``): clouds, camera frusta and paths, viewable with ``rerun file.rrd``."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from tpvp.io.atomic import atomic_path
+from tpvp.sensor.camera import D435, look_at_rotation
+
+
+def write_recording(path, clouds: dict, cameras: dict | None = None, paths: dict | None = None,
+                    application: str = "tpvp") -> Path:
+    """Save a rerun recording.
+
+    ``clouds``: name -> (points, rgb colour tuple); ``cameras``: group name -> (positions, look_ats);
+    ``paths``: name -> polyline ``(n, 3)``. Frusta use the D435 intrinsics.
+    """
+    import rerun as rr  # imported lazily: the viewer SDK is heavy and only needed here
+
+    path = Path(path)
+    recording = rr.RecordingStream(application)
+    with atomic_path(path) as tmp:
+        recording.save(str(tmp))
+        recording.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+        for name, (points, colour) in clouds.items():
+            points = np.asarray(points, dtype=np.float32).reshape(-1, 3)
+            recording.log(f"world/{name}", rr.Points3D(points, colors=colour, radii=0.0008), static=True)
+        for group, (positions, look_ats) in (cameras or {}).items():
+            positions = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
+            look_ats = np.broadcast_to(np.asarray(look_ats, dtype=np.float64).reshape(-1, 3), positions.shape)
+            for i, (p, t) in enumerate(zip(positions, look_ats)):
+                entity = f"world/{group}/{i:03d}"
+                recording.log(entity, rr.Transform3D(translation=p, mat3x3=look_at_rotation(p, t)), static=True)
+                recording.log(entity, rr.Pinhole(focal_length=[D435.fx, D435.fy],
+                                                 principal_point=[D435.cx, D435.cy],
+                                                 width=D435.width, height=D435.height,
+                                                 camera_xyz=rr.ViewCoordinates.RDF,
+                                                 image_plane_distance=0.03), static=True)
+        for name, polyline in (paths or {}).items():
+            recording.log(f"world/{name}", rr.LineStrips3D([np.asarray(polyline, dtype=np.float32)],
+                                                           colors=(128, 0, 160)), static=True)
+        recording.flush()
+        recording.disconnect()
+    return path
