@@ -114,3 +114,20 @@ def test_bundled_samples_are_real_scans_in_metres():
     assert maize.shape == (338874, 3)
     with pytest.raises(ConfigError, match="unknown bundled sample"):
         load_sample("tomato_9999")
+
+
+def test_generated_view_spaces_are_well_spread():
+    from tpvp.viewspace import generate_view_space, min_angle_deg
+
+    bundled = min_angle_deg(load_view_space("hemisphere"))
+    hemi = generate_view_space(32, hemisphere=True)
+    assert hemi.shape == (32, 3) and (hemi[:, 2] >= 0).all()
+    np.testing.assert_allclose(np.linalg.norm(hemi, axis=1), 0.4)
+    assert min_angle_deg(hemi) >= 0.95 * bundled  # as good as the authors' Tammes solution
+    sphere = generate_view_space(63)
+    assert min_angle_deg(sphere) >= 0.95 * min_angle_deg(load_view_space("sphere"))
+    # Brute-force check of the helper on three hand-made directions.
+    assert min_angle_deg(np.array([[1.0, 0, 0], [0, 1.0, 0], [1.0, 1.0, 0]])) == pytest.approx(45.0)
+    np.testing.assert_array_equal(generate_view_space(5), generate_view_space(5))
+    with pytest.raises(ConfigError):
+        generate_view_space(0)
