@@ -25,3 +25,15 @@ class ConfigError(TpvpError, ValueError):
 
 class SensorError(TpvpError, ValueError):
     """A view cannot be rendered (camera inside the geometry, zero-length look-at, ...)."""
+
+
+def checked_cloud(points, name: str = "point cloud"):
+    """``points`` as a float64 ``(N, 3)`` array; raises :class:`PointCloudError` if empty or not finite."""
+    import numpy as np
+
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    if len(points) == 0:
+        raise PointCloudError(f"{name} is empty")
+    if not np.all(np.isfinite(points)):
+        raise PointCloudError(f"{name} contains NaN or infinite coordinates")
+    return points

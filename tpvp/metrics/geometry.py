@@ -7,21 +7,12 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from tpvp.errors import ConfigError, PointCloudError
-
-
-def _cloud(points, name):
-    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-    if len(points) == 0:
-        raise PointCloudError(f"{name} is empty")
-    if not np.all(np.isfinite(points)):
-        raise PointCloudError(f"{name} contains NaN or infinite coordinates")
-    return points
+from tpvp.errors import ConfigError, checked_cloud
 
 
 def nearest_distances(source, target) -> np.ndarray:
     """Distance from every source point to its nearest target point."""
-    return cKDTree(_cloud(target, "target cloud")).query(_cloud(source, "source cloud"), workers=-1)[0]
+    return cKDTree(checked_cloud(target, "target cloud")).query(checked_cloud(source, "source cloud"), workers=-1)[0]
 
 
 def chamfer_distance(a, b) -> float:

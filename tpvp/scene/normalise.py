@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tpvp.errors import ConfigError, PointCloudError
+from tpvp.errors import ConfigError, PointCloudError, checked_cloud
 from tpvp.scene import voxels
 
 
@@ -46,15 +46,6 @@ def rotate_z(points: np.ndarray, degrees: float) -> np.ndarray:
     return _rotate_z(np.asarray(points, dtype=np.float64).reshape(-1, 3), degrees)
 
 
-def _check_cloud(points: np.ndarray, name: str) -> np.ndarray:
-    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-    if len(points) == 0:
-        raise PointCloudError(f"{name} is empty")
-    if not np.all(np.isfinite(points)):
-        raise PointCloudError(f"{name} contains NaN or infinite coordinates")
-    return points
-
-
 def normalise_plant(points, largest_side: float = 0.24, rotation_deg: float = 0.0,
                     centre: str = "bbox", table: bool = False, table_size: float = 0.4,
                     table_resolution: float = 0.002, reference_points=None) -> PlantScene:
@@ -64,8 +55,8 @@ def normalise_plant(points, largest_side: float = 0.24, rotation_deg: float = 0.
     so that two sessions of one plant stay in one frame. ``centre`` is ``"bbox"`` (paper) or
     ``"centroid"`` (the authors' code).
     """
-    points = _check_cloud(points, "plant cloud")
-    ref = points if reference_points is None else _check_cloud(reference_points, "reference cloud")
+    points = checked_cloud(points, "plant cloud")
+    ref = points if reference_points is None else checked_cloud(reference_points, "reference cloud")
     if not (largest_side > 0):
         raise ConfigError(f"largest_side must be > 0 m, got {largest_side!r}")
     if centre not in ("bbox", "centroid"):

@@ -109,20 +109,21 @@ def depth_image(grid: OccupancyGrid, position, look_at, config: SensorConfig = S
     return depth, hit
 
 
-def observe_many(grid: OccupancyGrid, positions, look_ats, config: SensorConfig = SensorConfig(),
-                 chunk: int | None = None) -> np.ndarray:
-    """Boolean matrix ``(views, voxels)``: which countable voxels each view observes.
+def observe_many(grid: OccupancyGrid, positions, look_ats, config: SensorConfig = SensorConfig()) -> np.ndarray:
+    """Dense boolean matrix ``(views, voxels)``: which countable voxels each view observes (parallel
+    over views); :func:`tpvp.visibility.visibility_matrix` gives the sparse form in chunks."""
+    positions, rotations = view_poses(grid, positions, look_ats)
+    return _observe_rotated(grid, positions, rotations, config)
 
-    Dense rows are produced chunk by chunk (parallel over views); use
-    :func:`tpvp.visibility.visibility_matrix` for the sparse form.
-    """
+
+def view_poses(grid: OccupancyGrid, positions, look_ats):
+    """Validated ``(V, 3)`` positions and their ``(V, 3, 3)`` camera rotations."""
     positions = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
     look_ats = np.broadcast_to(np.asarray(look_ats, dtype=np.float64).reshape(-1, 3), positions.shape)
     for p in positions:
         check_camera(grid, p)
-    rotations = np.stack([look_at_rotation(p, t) for p, t in zip(positions, look_ats)]) if len(
-        positions) else np.zeros((0, 3, 3))
-    return _observe_rotated(grid, positions, rotations, config)
+    rotations = [look_at_rotation(p, t) for p, t in zip(positions, look_ats)]
+    return positions, (np.stack(rotations) if rotations else np.zeros((0, 3, 3)))
 
 
 def _observe_rotated(grid, positions, rotations, config):

@@ -6,9 +6,8 @@ import numpy as np
 from scipy import sparse
 from tqdm.auto import tqdm
 
-from tpvp.sensor.camera import look_at_rotation
 from tpvp.sensor.grid import OccupancyGrid
-from tpvp.sensor.sensor import SensorConfig, _observe_rotated, check_camera
+from tpvp.sensor.sensor import SensorConfig, _observe_rotated, view_poses
 
 
 def visibility_matrix(grid: OccupancyGrid, positions, look_ats, config: SensorConfig = SensorConfig(),
@@ -19,12 +18,7 @@ def visibility_matrix(grid: OccupancyGrid, positions, look_ats, config: SensorCo
     Views are processed in chunks, in parallel within a chunk; ``progress`` shows a bar
     (default: only for more than 1,000 views).
     """
-    positions = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
-    look_ats = np.broadcast_to(np.asarray(look_ats, dtype=np.float64).reshape(-1, 3), positions.shape)
-    for p in positions:
-        check_camera(grid, p)
-    rotations = np.stack([look_at_rotation(p, t) for p, t in zip(positions, look_ats)]) if len(
-        positions) else np.zeros((0, 3, 3))
+    positions, rotations = view_poses(grid, positions, look_ats)
     if progress is None:
         progress = len(positions) > 1000
     blocks = []
