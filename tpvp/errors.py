@@ -28,10 +28,16 @@ class SensorError(TpvpError, ValueError):
 
 
 def checked_cloud(points, name: str = "point cloud"):
-    """``points`` as a float64 ``(N, 3)`` array; raises :class:`PointCloudError` if empty or not finite."""
+    """``points`` as a float64 ``(N, 3)`` array; raises :class:`PointCloudError` naming ``name`` if
+    it is not numeric, not ``(N, 3)``, empty or not finite."""
     import numpy as np
 
-    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    try:
+        points = np.asarray(points, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise PointCloudError(f"{name} must be an (N, 3) array of numbers") from None
+    if points.ndim != 2 or points.shape[1] != 3:
+        raise PointCloudError(f"{name} must be an (N, 3) array, got shape {points.shape}")
     if len(points) == 0:
         raise PointCloudError(f"{name} is empty")
     if not np.all(np.isfinite(points)):

@@ -56,7 +56,7 @@ import numpy as np
 import torch
 from scipy.spatial import cKDTree
 
-from tpvp.errors import ConfigError, PointCloudError
+from tpvp.errors import ConfigError, PointCloudError, checked_cloud
 from tpvp.io.pointcloud import MM_EXTENT_THRESHOLD
 from tpvp.metrics.geometry import chamfer_distance
 from tpvp.scene import voxels
@@ -156,7 +156,7 @@ class RegistrationResult:
 
     def warp(self, points) -> np.ndarray:
         """Apply the estimated deformation to other points (anchored on the same graph)."""
-        points = _check_cloud(points, "points to warp")
+        points = checked_cloud(points, "points to warp")
         idx, w = _anchors(self.nodes, points, self.config)
         return _warp_numpy(points, self.nodes, self.rotations, self.translations, idx, w)
 
@@ -164,20 +164,6 @@ class RegistrationResult:
 # --------------------------------------------------------------------------------------------------
 # input checks
 # --------------------------------------------------------------------------------------------------
-
-
-def _check_cloud(points, name: str) -> np.ndarray:
-    try:
-        points = np.asarray(points, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise PointCloudError(f"{name} must be an (N, 3) array of numbers") from None
-    if points.ndim != 2 or points.shape[1] != 3:
-        raise PointCloudError(f"{name} must be an (N, 3) array, got shape {points.shape}")
-    if len(points) == 0:
-        raise PointCloudError(f"{name} is empty")
-    if not np.all(np.isfinite(points)):
-        raise PointCloudError(f"{name} contains NaN or infinite coordinates")
-    return points
 
 
 def _check_pair(P: np.ndarray, Q: np.ndarray, node_coverage: float) -> None:
@@ -327,8 +313,8 @@ def register_embedded_deformation(P, Q, config: EDConfig | None = None) -> Regis
     config = EDConfig() if config is None else config
     if not isinstance(config, EDConfig):
         raise ConfigError(f"config must be an EDConfig, got {type(config).__name__}")
-    P = _check_cloud(P, "source cloud P")
-    Q = _check_cloud(Q, "target cloud Q")
+    P = checked_cloud(P, "source cloud P")
+    Q = checked_cloud(Q, "target cloud Q")
     _check_pair(P, Q, config.node_coverage)
     old_threads = torch.get_num_threads()
     if config.threads is not None:
