@@ -349,21 +349,35 @@ def _mark_pixel_hits(hit, pos, centres, countable, max_range_sq, seen):
 
 @njit(cache=True)
 def pixel_view_seen(pos, rot, fx, fy, cx, cy, width, height, stride, keys, exposed, res, centres,
-                    max_range_sq, countable, seen):
-    """Mark in ``seen`` the countable voxels (within range) that any pixel ray of the view hits."""
+                    max_range_sq, countable, seen, depth_buffer, hit_buffer):
+    """Mark in ``seen`` the countable voxels (within range) that any pixel ray of the view hits.
+
+    ``depth_buffer``/``hit_buffer`` are scratch images of at least the strided image size, reused
+    across views (allocating them per view costs more than the z-buffer itself).
+    """
     r0, r1, c0, c1 = pixel_window(pos, rot, fx, fy, cx, cy, width, height, stride, centres, res)
     if r1 < r0 or c1 < c0:
         return
-    depth = np.empty((r1 - r0 + 1, c1 - c0 + 1))
-    hit = np.empty((r1 - r0 + 1, c1 - c0 + 1), dtype=np.int64)
+    depth = depth_buffer[:r1 - r0 + 1, :c1 - c0 + 1]
+    hit = hit_buffer[:r1 - r0 + 1, :c1 - c0 + 1]
     pixel_view(pos, rot, fx, fy, cx, cy, stride, keys, exposed, res, r0, c0, depth, hit)
     _mark_pixel_hits(hit, pos, centres, countable, max_range_sq, seen)
 
 
 @njit(cache=True, parallel=True)
 def pixel_views(positions, rotations, fx, fy, cx, cy, width, height, stride, keys, exposed, res,
-                centres, max_range_sq, countable, seen):
-    """``seen[v, id] = True`` for every countable voxel seen by a pixel of view ``v``."""
-    for v in prange(positions.shape[0]):
-        pixel_view_seen(positions[v], rotations[v], fx, fy, cx, cy, width, height, stride, keys,
-                        exposed, res, centres, max_range_sq, countable, seen[v])
+                centres, max_range_sq, countable, seen, threads):
+    """``seen[v, id] = True`` for every countable voxel seen by a pixel of view ``v``.
+
+    Views are split into one contiguous block per thread so each thread reuses one scratch image.
+    """
+    rows = (height + stride - 1) // stride
+    cols = (width + stride - 1) // stride
+    n = positions.shape[0]
+    blocks = max(1, min(n, threads))
+    for b in prange(blocks):
+        depth = np.empty((rows, cols))
+        hit = np.empty((rows, cols), dtype=np.int64)
+        for v in range(b * n // blocks, (b + 1) * n // blocks):
+            pixel_view_seen(positions[v], rotations[v], fx, fy, cx, cy, width, height, stride, keys,
+                            exposed, res, centres, max_range_sq, countable, seen[v], depth, hit)

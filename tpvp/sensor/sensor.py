@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import numba
 import numpy as np
 
 from tpvp.errors import ConfigError, SensorError
@@ -78,10 +79,24 @@ def observe(grid: OccupancyGrid, position, look_at, config: SensorConfig = Senso
                                config.max_range**2, ex["countable"], ex["countable_box"], first_hit)
         return kernels.countable_hit_ids(first_hit, ex["countable"])
     seen = np.zeros(grid.size, dtype=np.bool_)
-    kernels.pixel_view_seen(position, rotation, k.fx, k.fy, k.cx, k.cy, k.width, k.height,
-                            int(config.pixel_stride), ex["keys"], ex["exposed"], grid.resolution,
-                            ex["centres"], config.max_range**2, ex["countable"], seen)
+    stride = int(config.pixel_stride)
+    shape = (-(-k.height // stride), -(-k.width // stride))
+    scratch = _scratch(shape)
+    kernels.pixel_view_seen(position, rotation, k.fx, k.fy, k.cx, k.cy, k.width, k.height, stride,
+                            ex["keys"], ex["exposed"], grid.resolution, ex["centres"],
+                            config.max_range**2, ex["countable"], seen, *scratch)
     return np.flatnonzero(seen)
+
+
+_SCRATCH: dict = {}  # numba kernels hold the GIL, so one pair per size is safe
+
+
+def _scratch(shape):
+    """Reusable z-buffer images for single-view rendering (one pair per image size)."""
+    if shape not in _SCRATCH:
+        _SCRATCH.clear()
+        _SCRATCH[shape] = (np.empty(shape), np.empty(shape, dtype=np.int64))
+    return _SCRATCH[shape]
 
 
 def depth_image(grid: OccupancyGrid, position, look_at, config: SensorConfig = SensorConfig()):
@@ -141,5 +156,5 @@ def _observe_rotated(grid, positions, rotations, config):
     else:
         kernels.pixel_views(positions, rotations, k.fx, k.fy, k.cx, k.cy, k.width, k.height,
                             int(config.pixel_stride), ex["keys"], ex["exposed"], grid.resolution,
-                            ex["centres"], config.max_range**2, ex["countable"], seen)
+                            ex["centres"], config.max_range**2, ex["countable"], seen, numba.get_num_threads())
     return seen
