@@ -18,11 +18,10 @@ import time
 import numpy as np
 import pandas as pd
 
-from tpvp.scene import voxels
 from tpvp.scene.normalise import normalise_plant
 from tpvp.scene.plants import generate_plant, generate_session_pair
 from tpvp.scene.samples import load_sample
-from tpvp.sensor.grid import build_grid
+from tpvp.sensor.grid import plant_grid
 from tpvp.viewspace import load_view_space
 from tpvp.visibility import oracle_voxels, visibility_matrix
 
@@ -50,18 +49,15 @@ def principal_horizontal_extent(points):
 
 def describe(name, seed, raw_points, views, seconds=None, leaves=None):
     scene = normalise_plant(raw_points, table=True)
-    plant = voxels.voxelise(scene.points, 0.002)
-    table = voxels.voxelise(scene.table_points, 0.002)
-    grid = build_grid(np.concatenate([plant, table]), 0.002,
-                      np.r_[np.ones(len(plant), bool), np.zeros(len(table), bool)])
+    grid = plant_grid(scene.points, scene.table_points, 0.002)
     matrix = visibility_matrix(grid, views, np.zeros(3))
     oracle = oracle_voxels(matrix)
     ext = np.ptp(scene.points, axis=0)
     major, minor = principal_horizontal_extent(scene.points)
-    return {"plant": name, "seed": seed, "points": len(raw_points), "voxels": len(plant),
+    return {"plant": name, "seed": seed, "points": len(raw_points), "voxels": int(grid.countable.sum()),
             "bbox (m)": f"{ext[0]:.3f} x {ext[1]:.3f} x {ext[2]:.3f}",
             "principal xy (m)": f"{major:.3f} x {minor:.3f}", "leaves": leaves,
-            "oracle %": 100 * len(oracle) / len(plant),
+            "oracle %": 100 * len(oracle) / grid.countable.sum(),
             **{k: 100 * v for k, v in greedy_curve(matrix, oracle).items()}, "gen s": seconds}
 
 

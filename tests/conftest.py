@@ -1,9 +1,7 @@
-import numpy as np
 import pytest
 
-from tpvp.scene import voxels
 from tpvp.scene.normalise import normalise_plant
-from tpvp.sensor.grid import build_grid
+from tpvp.sensor.grid import plant_grid
 from tpvp.viewspace import load_view_space
 
 
@@ -18,9 +16,5 @@ def tomato_points():
 @pytest.fixture(scope="session")
 def tomato_scene(tomato_points):
     """Ground-truth grid (2 mm, with the supporting table) and the 32 hemisphere views."""
-    res = 0.002
-    plant = voxels.voxelise(tomato_points.points, res)
-    table = voxels.voxelise(tomato_points.table_points, res)
-    grid = build_grid(np.concatenate([plant, table]), res,
-                      np.r_[np.ones(len(plant), bool), np.zeros(len(table), bool)])
+    grid = plant_grid(tomato_points.points, tomato_points.table_points, 0.002)
     return grid, load_view_space("hemisphere")

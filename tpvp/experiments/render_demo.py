@@ -13,10 +13,9 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from tpvp.scene import voxels
 from tpvp.scene.normalise import normalise_plant
 from tpvp.scene.samples import load_sample
-from tpvp.sensor.grid import build_grid
+from tpvp.sensor.grid import plant_grid
 from tpvp.sensor.sensor import SensorConfig
 from tpvp.viewspace import load_view_space
 from tpvp.visibility import coverage_ratio, oracle_voxels, visibility_matrix
@@ -37,10 +36,7 @@ def run_render_demo(config: RenderDemoConfig = RenderDemoConfig()):
     started = time.perf_counter()
     scene = normalise_plant(load_sample(config.sample), largest_side=config.largest_side,
                             table=config.table, table_resolution=config.resolution)
-    plant = voxels.voxelise(scene.points, config.resolution)
-    table = voxels.voxelise(scene.table_points, config.resolution) if config.table else np.zeros((0, 3), np.int64)
-    grid = build_grid(np.concatenate([plant, table]), config.resolution,
-                      np.r_[np.ones(len(plant), bool), np.zeros(len(table), bool)])
+    grid = plant_grid(scene.points, scene.table_points, config.resolution)
     views = load_view_space(config.view_space)
     t0 = time.perf_counter()
     matrix = visibility_matrix(grid, views, np.zeros(3), SensorConfig(model=config.model))
@@ -61,8 +57,8 @@ def run_render_demo(config: RenderDemoConfig = RenderDemoConfig()):
         })
     summary = {
         "sample": config.sample,
-        "plant_voxels": int(len(plant)),
-        "table_voxels": int(len(table)),
+        "plant_voxels": int(grid.countable.sum()),
+        "table_voxels": int((~grid.countable).sum()),
         "oracle_voxels": int(len(oracle)),
         "views": len(views),
         "render_ms_per_view": 1e3 * render_seconds / len(views),

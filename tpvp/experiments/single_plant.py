@@ -21,7 +21,7 @@ from tpvp.path.tsp import shortest_open_path
 from tpvp.registration import EDConfig, register_embedded_deformation
 from tpvp.scene import voxels
 from tpvp.scene.normalise import normalise_plant
-from tpvp.sensor.grid import build_grid
+from tpvp.sensor.grid import build_grid, plant_grid
 from tpvp.sensor.sensor import SensorConfig
 from tpvp.setcover import SetCoverConfig, solve_set_cover
 from tpvp.viewspace import INITIAL_VIEW_INDICES, load_view_space
@@ -99,10 +99,7 @@ def build_scene(previous_points, current_points, config: SinglePlantConfig = Sin
     current = normalise_plant(current_points, config.largest_side, config.rotation_deg,
                               table=config.uses_table, table_resolution=config.gt_resolution)
     previous = current.transform(np.asarray(previous_points, dtype=np.float64))
-    plant = voxels.voxelise(current.points, config.gt_resolution)
-    table = voxels.voxelise(current.table_points, config.gt_resolution) if config.uses_table else np.zeros((0, 3), np.int64)
-    grid = build_grid(np.concatenate([plant, table]), config.gt_resolution,
-                      np.r_[np.ones(len(plant), bool), np.zeros(len(table), bool)])
+    grid = plant_grid(current.points, current.table_points, config.gt_resolution)
     views = load_view_space(config.view_space)
     truth = visibility_matrix(grid, views, np.zeros(3), config.sensor)
     return Scene(previous, current.points, grid, views, truth, oracle_voxels(truth))

@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial import cKDTree
 
-from tpvp.errors import ConfigError, PointCloudError
+from tpvp.errors import ConfigError, checked_cloud
 from tpvp.scene import voxels
 
 # Refuse candidate grids larger than this (a sign of wrong units or a wrong half_size).
@@ -56,20 +56,6 @@ class InflationResult:
     inflation: np.ndarray
     planning: np.ndarray
     counts: dict = field(default_factory=dict)
-
-
-def _cloud(points, name: str) -> np.ndarray:
-    try:
-        points = np.asarray(points, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise PointCloudError(f"{name} must be an (N, 3) array of numbers") from None
-    if points.ndim != 2 or points.shape[1] != 3:
-        raise PointCloudError(f"{name} must be an (N, 3) array, got shape {points.shape}")
-    if len(points) == 0:
-        raise PointCloudError(f"{name} is empty")
-    if not np.all(np.isfinite(points)):
-        raise PointCloudError(f"{name} contains NaN or infinite coordinates")
-    return points
 
 
 def _vector3(value, name: str) -> np.ndarray:
@@ -112,8 +98,8 @@ def inflate(P_warped, Q, centre, half_size: float, config: InflationConfig | Non
     config = InflationConfig() if config is None else config
     if not isinstance(config, InflationConfig):
         raise ConfigError(f"config must be an InflationConfig, got {type(config).__name__}")
-    P_warped = _cloud(P_warped, "warped previous cloud P~")
-    Q = _cloud(Q, "current cloud Q")
+    P_warped = checked_cloud(P_warped, "warped previous cloud P~")
+    Q = checked_cloud(Q, "current cloud Q")
     cand = candidate_grid(centre, half_size, config.step)
     n_cand = len(cand)
     near_count = 0
@@ -143,8 +129,8 @@ def inflate_voxels(P_warped, Q, voxel: float = 0.01, gamma_near: float = 0.01, g
     are dropped - from the planning cloud too - and dilation does not leave the keys it spans.
     Planning cloud = P~ u Q u I (Q always added, as in the reference for rows).
     """
-    P_warped = _cloud(P_warped, "warped previous cloud P~")
-    Q = _cloud(Q, "current cloud Q")
+    P_warped = checked_cloud(P_warped, "warped previous cloud P~")
+    Q = checked_cloud(Q, "current cloud Q")
     voxel = _positive(voxel, "voxel")
     gamma_near = _positive(gamma_near, "gamma_near")
     gamma_far = _positive(gamma_far, "gamma_far")

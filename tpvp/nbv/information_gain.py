@@ -10,13 +10,12 @@ occlude with probability ``1 - unknown_visibility``). Ray directions are those o
 
 from __future__ import annotations
 
-import math
 
 import numpy as np
 from numba import njit, prange
 
 from tpvp.errors import ConfigError
-from tpvp.nbv.occupancy import MODE_GAIN, MODE_VISIBILITY, OccupancyMap, walk
+from tpvp.nbv.occupancy import MODE_GAIN, MODE_VISIBILITY, OccupancyMap, pixel_ray, walk
 from tpvp.sensor.camera import D435, Intrinsics, look_at_rotations
 
 
@@ -37,11 +36,7 @@ def _gains(positions, rotations, fx, fy, cx, cy, width, height, stride, max_rang
         for r in range(nrows):
             yn = (np.float64(r * stride) - cy) / fy
             for c in range(ncols):
-                xn = (np.float64(c * stride) - cx) / fx
-                dx = rot[0, 0] * xn + rot[0, 1] * yn + rot[0, 2]
-                dy = rot[1, 0] * xn + rot[1, 1] * yn + rot[1, 2]
-                dz = rot[2, 0] * xn + rot[2, 1] * yn + rot[2, 2]
-                t_stop = max_range / math.sqrt(dx * dx + dy * dy + dz * dz)
+                dx, dy, dz, t_stop = pixel_ray(rot, c, stride, yn, cx, fx, max_range)
                 count += walk(ox, oy, oz, dx, dy, dz, t_stop, state, lo[0], lo[1], lo[2], res,
                               mode, True, 0, 0, 0, stamp, tag, no_keys)
         out[v] = stamp.sum() if visibility > 0.0 else count

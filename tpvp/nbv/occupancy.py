@@ -239,6 +239,17 @@ def _code(kx, ky, kz):
     return ((kx + _KEY_OFFSET) << 42) | ((ky + _KEY_OFFSET) << 21) | (kz + _KEY_OFFSET)
 
 
+@njit(cache=True, inline="always")
+def pixel_ray(rot, c, stride, yn, cx, fx, max_range):
+    """World direction of pixel column ``c`` on a row with normalised ``yn`` (the element-wise
+    expression of ``pixel_ray_directions``, bit for bit) and the ray parameter at ``max_range``."""
+    xn = (np.float64(c * stride) - cx) / fx
+    dx = rot[0, 0] * xn + rot[0, 1] * yn + rot[0, 2]
+    dy = rot[1, 0] * xn + rot[1, 1] * yn + rot[1, 2]
+    dz = rot[2, 0] * xn + rot[2, 1] * yn + rot[2, 2]
+    return dx, dy, dz, max_range / math.sqrt(dx * dx + dy * dy + dz * dz)
+
+
 @njit(cache=True)
 def walk(ox, oy, oz, dx, dy, dz, t_stop, state, lo0, lo1, lo2, res, mode, skip,
          ex, ey, ez, stamp, tag, outer):
@@ -362,10 +373,6 @@ def _carve_pixels(position, rot, fx, fy, cx, cy, width, height, stride, max_rang
     for r in range(nrows):
         yn = (np.float64(r * stride) - cy) / fy
         for c in range(ncols):
-            xn = (np.float64(c * stride) - cx) / fx
-            dx = rot[0, 0] * xn + rot[0, 1] * yn + rot[0, 2]
-            dy = rot[1, 0] * xn + rot[1, 1] * yn + rot[1, 2]
-            dz = rot[2, 0] * xn + rot[2, 1] * yn + rot[2, 2]
-            t_stop = max_range / math.sqrt(dx * dx + dy * dy + dz * dz)
+            dx, dy, dz, t_stop = pixel_ray(rot, c, stride, yn, cx, fx, max_range)
             walk(ox, oy, oz, dx, dy, dz, t_stop, state, lo[0], lo[1], lo[2], res, MODE_FREESPACE,
                  skip, 0, 0, 0, own, 1.0, outer)

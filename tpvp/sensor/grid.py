@@ -104,3 +104,11 @@ def grid_from_points(points: np.ndarray, resolution: float, countable_points=Non
     if len(keys) == 0:
         raise PointCloudError("cannot build an occupancy grid from an empty point cloud")
     return build_grid(keys, resolution, countable_points)
+
+
+def plant_grid(plant_points: np.ndarray, table_points: np.ndarray, resolution: float) -> OccupancyGrid:
+    """Ground truth of a single-plant scene: plant voxels count, supporting-table voxels only occlude."""
+    plant = voxels.voxelise(plant_points, resolution)
+    table = voxels.difference_keys(voxels.voxelise(np.asarray(table_points).reshape(-1, 3), resolution), plant)
+    return build_grid(np.concatenate([plant, table]), resolution,
+                      np.r_[np.ones(len(plant), bool), np.zeros(len(table), bool)])
