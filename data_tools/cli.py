@@ -1,0 +1,176 @@
+"""``python -m data_tools``: download and clean the public data, prepare new sessions.
+
+Errors the user can fix are printed on one line (exit status 2), never as a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from tpvp.errors import TpvpError
+
+
+def _pheno4d_download(args) -> int:
+    from data_tools.pheno4d import download_pheno4d
+
+    url = {"url": args.url} if args.url else {}
+    path = download_pheno4d(args.output, sha256=args.sha256, extract=not args.no_extract, **url)
+    print(f"Pheno4D ready: {path}")
+    return 0
+
+
+def _pheno4d_prepare(args) -> int:
+    from data_tools.pheno4d import Pheno4DConfig, prepare_pheno4d
+
+    config = Pheno4DConfig(largest_side=args.largest_side, gt_resolution=args.gt_resolution, year=args.year)
+    table = prepare_pheno4d(args.source, args.output, config, force=args.force)
+    where = args.source or "the bundled real samples"
+    skipped = table.attrs.get("skipped", [])
+    for name, why in skipped:
+        print(f"  skipped {name}: {why}")
+    print(f"prepared {len(table)} scan(s) of {table['plant'].nunique()} plant(s) and "
+          f"{len(table.attrs.get('pairs', []))} session pair(s) from {where} into {args.output}/ "
+          f"(manifest.csv, pairs.csv){f'; skipped {len(skipped)} file(s)' if skipped else ''}")
+    return 0
+
+
+def _greenhouse_download(args) -> int:
+    from data_tools.kaggle_download import download_greenhouse
+
+    path = download_greenhouse(args.output, args.dataset, unzip=not args.no_unzip, force=args.force)
+    print(f"greenhouse dataset in {path}; next: python -m data_tools greenhouse clean {path}")
+    return 0
+
+
+def _clean_configs(args):
+    from data_tools.alignment import IcpConfig
+    from data_tools.cleaning import CleanConfig
+
+    return (CleanConfig(voxel_size=args.voxel_size, sor_std_ratio=args.sor_std_ratio),
+            IcpConfig(max_correspondence=args.icp_distance))
+
+
+def _greenhouse_clean(args) -> int:
+    from data_tools.greenhouse import clean_greenhouse
+
+    if args.source is None and args.manifest is None:
+        raise TpvpError("give the folder of session scans, or --manifest FILE")
+    clean, icp = _clean_configs(args)
+    table = clean_greenhouse(args.source, args.output, manifest=args.manifest, landmarks=args.landmarks,
+                             config_dir=args.config, units=args.units, clean=clean, icp=icp, force=args.force)
+    print(table[["site", "date", "points_raw", "points", "alignment", "fitness", "inlier_rmse_m",
+                 "rotation_deg", "translation_m"]].to_string(index=False, float_format="{:.4f}".format))
+    print(f"wrote {len(table)} session(s) to {args.output}/ (Processed_3D_Model, transforms, manifest.csv)")
+    return 0
+
+
+def _greenhouse_standin(args) -> int:
+    from data_tools.standin import write_processed_standin, write_raw_standin
+
+    if args.processed:
+        folder = write_processed_standin(args.output, args.room, args.seed, args.sessions)
+    else:
+        folder = write_raw_standin(args.output, args.room, args.seed, args.sessions).folder
+    print(f"wrote generated {args.room} sessions to {folder}")
+    return 0
+
+
+def _prepare_session(args) -> int:
+    from data_tools.sessions import prepare_session
+
+    clean, icp = _clean_configs(args)
+    row = prepare_session(args.dataset, args.site, args.date, args.scan, landmarks=args.landmarks,
+                          units=args.units, clean=clean, icp=icp, force=args.force)
+    print(f"{row['site']} {row['date']}: {row['points_raw']} -> {row['points']} points, alignment "
+          f"{row['alignment']} (fitness {row['fitness']:.3f}, RMSE {1000 * row['inlier_rmse_m']:.1f} mm, "
+          f"{row['rotation_deg']:.2f} deg, {row['translation_m']:.3f} m); wrote {args.dataset}/{row['file']}")
+    return 0
+
+
+def _cleaning_options(p):
+    p.add_argument("--units", default="m", choices=["m", "mm", "auto"],
+                   help="units of the scans (default: %(default)s; Polycam exports metres)")
+    p.add_argument("--voxel-size", type=float, default=0.005, help="downsampling voxel, m (default: %(default)s)")
+    p.add_argument("--sor-std-ratio", type=float, default=2.0,
+                   help="statistical outlier removal cut, standard deviations (default: %(default)s)")
+    p.add_argument("--icp-distance", type=float, default=0.05,
+                   help="ICP correspondence distance, m (default: %(default)s)")
+    p.add_argument("--force", action="store_true", help="replace existing output")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="python -m data_tools", description=__doc__.splitlines()[0])
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    pheno = sub.add_parser("pheno4d", help="the Pheno4D single-plant scans").add_subparsers(dest="action", required=True)
+    p = pheno.add_parser("download", help="download (resumable) and unpack the official Pheno4D archive")
+    p.add_argument("--output", default="data/raw", help="download folder (default: %(default)s)")
+    p.add_argument("--url", default=None, help="archive URL (default: the official Pheno4D.zip)")
+    p.add_argument("--sha256", default=None, help="expected SHA-256 of the archive, if you have one")
+    p.add_argument("--no-extract", action="store_true", help="keep the zip only (prepare reads it directly)")
+    p.set_defaults(func=_pheno4d_download)
+    p = pheno.add_parser("prepare", help="convert every plant/day into a clean dataset (manifest, pairs, 2 mm grids)")
+    p.add_argument("source", nargs="?", default=None,
+                   help="extracted Pheno4D folder or Pheno4D.zip (default: the bundled real samples)")
+    p.add_argument("--output", default="data/pheno4d", help="dataset folder (default: %(default)s)")
+    p.add_argument("--largest-side", type=float, default=0.24, help="normalised largest side, m (default: %(default)s)")
+    p.add_argument("--gt-resolution", type=float, default=0.002, help="ground-truth voxel, m (default: %(default)s)")
+    p.add_argument("--year", type=int, default=2020, help="year of the MMDD dates in the file names (default: %(default)s)")
+    p.add_argument("--force", action="store_true", help="replace an existing dataset")
+    p.set_defaults(func=_pheno4d_prepare)
+
+    green = sub.add_parser("greenhouse", help="the greenhouse multi-session row dataset").add_subparsers(dest="action", required=True)
+    p = green.add_parser("download", help="download the dataset from Kaggle (needs an API token)")
+    p.add_argument("--output", default="data/greenhouse_raw", help="download folder (default: %(default)s)")
+    p.add_argument("--dataset", default="sicongpan/greenhouse-multi-session-row-dataset")
+    p.add_argument("--no-unzip", action="store_true")
+    p.add_argument("--force", action="store_true", help="download again even if complete")
+    p.set_defaults(func=_greenhouse_download)
+    p = green.add_parser("clean", help="crop, remove supports and outliers, downsample, align every session to day one")
+    p.add_argument("source", nargs="?", default=None, help="folder of per-session scans (names hold room and date)")
+    p.add_argument("--manifest", type=Path, default=None, help="CSV listing site,date,file[,landmarks] instead")
+    p.add_argument("--landmarks", type=Path, default=None, help="folder of landmark files named like the sessions")
+    p.add_argument("--config", type=Path, default=None,
+                   help="folder of <site>_bbx_config.yaml box files (default: the bundled room1/room4)")
+    p.add_argument("--output", default="data/greenhouse", help="dataset folder (default: %(default)s)")
+    _cleaning_options(p)
+    p.set_defaults(func=_greenhouse_clean)
+    p = green.add_parser("standin", help="write generated rows in the dataset's layouts (offline stand-in)")
+    p.add_argument("--output", default="data/greenhouse_standin")
+    p.add_argument("--room", default="room1", choices=["room1", "room4"])
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--sessions", type=int, default=5, help="number of sessions 1..5 (default: %(default)s)")
+    p.add_argument("--processed", action="store_true",
+                   help="write processed models (Processed_3D_Model) instead of raw captures with landmarks")
+    p.set_defaults(func=_greenhouse_standin)
+
+    p = sub.add_parser("prepare-session", help="add a new scan of a site to a dataset (crop, clean, align)")
+    p.add_argument("--site", required=True, help="site name, e.g. room1")
+    p.add_argument("--date", required=True, help="session date, YYYY-MM-DD")
+    p.add_argument("--scan", required=True, type=Path, help="the new scan (ply/pcd/xyz/obj)")
+    p.add_argument("--landmarks", type=Path, default=None,
+                   help="CSV of picked pairs source_x..z,target_x..z (scan -> reference day)")
+    p.add_argument("--dataset", default="data/greenhouse", help="dataset folder (default: %(default)s)")
+    _cleaning_options(p)
+    p.set_defaults(func=_prepare_session)
+    return parser
+
+
+def main(argv=None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return args.func(args)
+    except TpvpError as exc:
+        name = " ".join(x for x in (args.command, getattr(args, "action", None)) if x)
+        print(f"data_tools {name}: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("interrupted: outputs are only moved into place at the end, so none is half-written",
+              file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,299 @@
+"""The greenhouse multi-session row dataset: find the sessions, clean them, align them to day one.
+
+Input layouts accepted (:func:`find_sessions`):
+
+* a folder (searched recursively) of per-session scans whose names hold the room and the date,
+  ``room1_20250918*.ply`` / ``room4-2025-09-22.pcd`` ... - the dataset's processed models
+  ``Processed_3D_Model/room<k>_<YYYYMMDD>.pcd`` as well as raw captures;
+* an explicit manifest CSV with columns ``site`` (or ``room``), ``date``, ``file`` and optionally
+  ``landmarks`` (paths relative to the manifest).
+
+Output (:func:`clean_greenhouse`), a dataset folder the notebooks and ``prepare-session`` read::
+
+    Processed_3D_Model/<site>_<YYYYMMDD>.pcd   cleaned, aligned to the site's first day, metres
+    transforms/<site>_<YYYYMMDD>.txt           4x4 capture frame -> reference frame
+    reference/<site>_static.pcd                the first day's full scan (downsampled), to align
+                                               later sessions on its static structure
+    config/<site>_bbx_config.yaml              the plant/view boxes used for cropping
+    manifest.csv (+ .parquet)                  one row per session, see MANIFEST_COLUMNS
+
+The whole output is staged and committed at the end (:mod:`data_tools.staging`): an interrupted
+run leaves an existing dataset exactly as it was.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import re
+import shutil
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from data_tools.alignment import Alignment, IcpConfig, align_to_reference, transform_points
+from data_tools.cleaning import CleanConfig, clean_scan, voxel_downsample
+from data_tools.errors import ConfigError, DatasetError, InputFileError, PointCloudError
+from data_tools.manifest import read_table, stage_manifest
+from data_tools.staging import staged_update
+from tpvp.io import READ_EXTENSIONS, read_point_cloud, write_point_cloud
+from tpvp.scene.boxes import DATA_DIR as BUNDLED_CONFIG_DIR
+from tpvp.scene.boxes import OrientedBox, read_bbx_config
+
+PROCESSED_FOLDER = "Processed_3D_Model"
+SESSION_NAME = re.compile(r"(?P<site>room\d+)[_\-. ]?(?P<date>20\d\d-?\d\d-?\d\d)", re.IGNORECASE)
+MANIFEST_COLUMNS = (
+    "site", "date", "file", "source", "reference_date", "transform_file",
+    "points_raw", "points_cropped", "points_supports_removed", "points_outliers_removed",
+    "points_downsampled", "points", "extent_x", "extent_y", "extent_z",
+    "alignment", "fitness", "inlier_rmse_m", "landmark_rmse_m", "rotation_deg", "translation_m", "units",
+)
+# Preferred file types when one session has several files (point clouds before meshes).
+_EXT_RANK = {ext: i for i, ext in enumerate((".pcd", ".ply", ".xyz", ".txt", ".pts", ".csv", ".obj", ".glb", ".stl", ".off"))}
+
+
+@dataclass(frozen=True)
+class SessionScan:
+    """One session's input scan."""
+
+    site: str
+    date: dt.date
+    path: Path
+    landmarks: Path | None = None
+
+    @property
+    def name(self) -> str:
+        return f"{self.site}_{self.date:%Y%m%d}"
+
+
+@dataclass(frozen=True)
+class Discovery:
+    sessions: list[SessionScan]
+    skipped: list[tuple[str, str]] = field(default_factory=list)  # (file, why)
+
+    def report(self) -> str:
+        """What was found and what was skipped, for the user."""
+        lines = [f"found {len(self.sessions)} session(s):"]
+        lines += [f"  {s.site} {s.date}  {s.path}" + (f"  (landmarks {s.landmarks.name})" if s.landmarks else "")
+                  for s in self.sessions]
+        if self.skipped:
+            lines.append(f"skipped {len(self.skipped)} file(s):")
+            lines += [f"  {name}: {why}" for name, why in self.skipped]
+        return "\n".join(lines)
+
+
+def parse_date(value, what: str = "date") -> dt.date:
+    """``YYYY-MM-DD`` or ``YYYYMMDD`` -> date; ConfigError naming ``what`` otherwise."""
+    text = str(value).strip()
+    digits = text.replace("-", "")
+    if re.fullmatch(r"\d{8}", digits) and (len(text) == 8 or re.fullmatch(r"\d{4}-\d{2}-\d{2}", text)):
+        try:
+            return dt.date(int(digits[:4]), int(digits[4:6]), int(digits[6:]))
+        except ValueError:
+            pass
+    raise ConfigError(f"{what} must be a date YYYY-MM-DD or YYYYMMDD, got {value!r}")
+
+
+def _is_processed(path: Path, site: str, date: dt.date) -> bool:
+    return PROCESSED_FOLDER.lower() in (p.lower() for p in path.parts) or path.stem.lower() == f"{site}_{date:%Y%m%d}"
+
+
+def _landmarks_for(landmarks_dir: Path | None, site: str, date: dt.date) -> Path | None:
+    if landmarks_dir is None:
+        return None
+    found = []
+    for path in sorted(landmarks_dir.rglob("*")):
+        match = SESSION_NAME.search(path.name)
+        if path.is_file() and path.suffix.lower() in (".csv", ".txt") and match \
+                and match["site"].lower() == site and parse_date(match["date"]) == date:
+            found.append(path)
+    if len(found) > 1:
+        raise InputFileError(f"{landmarks_dir}: several landmark files for {site} {date}: "
+                             f"{', '.join(p.name for p in found)}")
+    return found[0] if found else None
+
+
+def find_sessions(source, *, manifest=None, landmarks=None) -> Discovery:
+    """Find the session scans in ``source`` (a folder), or those listed in ``manifest`` (a CSV).
+
+    ``landmarks``: a folder of landmark files named like the sessions (``room1_20250918*.csv``).
+    When a session has several files, the processed model is kept (then point clouds before
+    meshes); the others are reported as skipped.
+    """
+    landmarks_dir = Path(landmarks) if landmarks is not None else None
+    if landmarks_dir is not None and not landmarks_dir.is_dir():
+        raise InputFileError(f"{landmarks_dir}: landmarks folder not found")
+    if manifest is not None:
+        return _sessions_from_manifest(Path(manifest), landmarks_dir)
+    source = Path(source)
+    if not source.is_dir():
+        raise InputFileError(f"{source}: folder not found" if not source.exists() else
+                             f"{source}: not a folder (pass the folder holding the session scans, or --manifest)")
+    candidates: dict[tuple[str, dt.date], list[Path]] = {}
+    skipped = []
+    for path in sorted(p for p in source.rglob("*") if p.is_file()):
+        rel = str(path.relative_to(source))
+        if any(part.startswith(".") for part in path.relative_to(source).parts):
+            continue  # hidden files and our own staging folders
+        if landmarks_dir is not None and landmarks_dir.resolve() in path.resolve().parents:
+            continue
+        if path.suffix.lower() not in READ_EXTENSIONS:
+            skipped.append((rel, f"not a point cloud or mesh ({path.suffix or 'no extension'})"))
+            continue
+        match = SESSION_NAME.search(path.name)
+        if "landmark" in path.name.lower():
+            skipped.append((rel, "a landmarks file (pass its folder with --landmarks)"))
+            continue
+        if not match:
+            skipped.append((rel, "name holds no room and date (expected e.g. room1_20250918*.ply)"))
+            continue
+        try:
+            date = parse_date(match["date"])
+        except ConfigError:
+            skipped.append((rel, f"{match['date']!r} is not a valid date"))
+            continue
+        candidates.setdefault((match["site"].lower(), date), []).append(path)
+    sessions = []
+    for (site, date), paths in sorted(candidates.items()):
+        ranked = sorted(paths, key=lambda p: (not _is_processed(p, site, date), _EXT_RANK.get(p.suffix.lower(), 99), str(p)))
+        for other in ranked[1:]:
+            skipped.append((str(other.relative_to(source)), f"another file of {site} {date} was used: {ranked[0].name}"))
+        sessions.append(SessionScan(site, date, ranked[0], _landmarks_for(landmarks_dir, site, date)))
+    if not sessions:
+        raise InputFileError(f"{source}: no session scans found (expected files named like room1_20250918*.ply "
+                             f"or {PROCESSED_FOLDER}/room1_20250915.pcd; {len(skipped)} file(s) skipped)")
+    return Discovery(sessions, skipped)
+
+
+def _sessions_from_manifest(path: Path, landmarks_dir: Path | None) -> Discovery:
+    table = read_table(path, required=("date", "file"))
+    site_column = "site" if "site" in table.columns else "room" if "room" in table.columns else None
+    if site_column is None:
+        raise DatasetError(f"{path}: missing column 'site' (or 'room')")
+    sessions, seen = [], set()
+    for i, row in table.iterrows():
+        where = f"{path}, row {i + 2}"
+        site = row[site_column].strip().lower()
+        if not re.fullmatch(r"[a-z0-9][a-z0-9_\-]*", site):
+            raise DatasetError(f"{where}: site {row[site_column]!r} must be letters, digits, '_' or '-'")
+        date = parse_date(row["date"], f"{where}: date")
+        scan = (path.parent / row["file"]).resolve()
+        if not scan.is_file():
+            raise InputFileError(f"{where}: file {row['file']!r} not found ({scan})")
+        if (site, date) in seen:
+            raise DatasetError(f"{where}: session {site} {date} is listed twice")
+        seen.add((site, date))
+        marks = row.get("landmarks")
+        marks = marks.strip() if isinstance(marks, str) else ""
+        marks_path = (path.parent / marks).resolve() if marks else _landmarks_for(landmarks_dir, site, date)
+        sessions.append(SessionScan(site, date, scan, marks_path))
+    if not sessions:
+        raise DatasetError(f"{path}: the manifest lists no sessions")
+    return Discovery(sorted(sessions, key=lambda s: (s.site, s.date)), [])
+
+
+# ----------------------------------------------------------------------------- site configuration
+def site_boxes(site: str, config_dir=None) -> tuple[dict[str, OrientedBox], Path] | tuple[None, None]:
+    """Boxes of ``site`` from ``config_dir/<site>_bbx_config.yaml``, else the bundled room
+    configuration; ``(None, None)`` when neither exists."""
+    for folder in ([Path(config_dir)] if config_dir is not None else []) + [BUNDLED_CONFIG_DIR]:
+        path = folder / f"{site}_bbx_config.yaml"
+        if path.is_file():
+            return read_bbx_config(path), path
+    return None, None
+
+
+def _session_row(scan: SessionScan, reference_date: dt.date, counts: dict, points: np.ndarray,
+                 box: OrientedBox | None, alignment: Alignment, units: str) -> dict:
+    local = box.to_local(points) if box is not None else points
+    extent = local.max(axis=0) - local.min(axis=0)
+    return {
+        "site": scan.site, "date": f"{scan.date:%Y-%m-%d}",
+        "file": f"{PROCESSED_FOLDER}/{scan.name}.pcd", "source": str(scan.path),
+        "reference_date": f"{reference_date:%Y-%m-%d}", "transform_file": f"transforms/{scan.name}.txt",
+        "points_raw": counts["raw"], "points_cropped": counts.get("cropped", counts["raw"]),
+        "points_supports_removed": counts.get("supports_removed", counts["raw"]),
+        "points_outliers_removed": counts["outliers_removed"], "points_downsampled": counts["downsampled"],
+        "points": len(points), "extent_x": extent[0], "extent_y": extent[1], "extent_z": extent[2],
+        "alignment": alignment.method, "fitness": alignment.fitness, "inlier_rmse_m": alignment.inlier_rmse,
+        "landmark_rmse_m": alignment.landmark_rmse, "rotation_deg": alignment.rotation_deg,
+        "translation_m": float(np.linalg.norm(alignment.translation)), "units": units,
+    }
+
+
+def _transform_text(transform: np.ndarray) -> str:
+    return "\n".join(" ".join(f"{v:.12g}" for v in row) for row in transform) + "\n"
+
+
+def write_session(stage, scan: SessionScan, cleaned: np.ndarray, alignment: Alignment) -> None:
+    """Stage a session's model and transform."""
+    write_point_cloud(stage.path(f"{PROCESSED_FOLDER}/{scan.name}.pcd"), cleaned, dtype="float32")
+    stage.path(f"transforms/{scan.name}.txt").write_text(_transform_text(alignment.transform))
+
+
+def process_session(scan: SessionScan, points: np.ndarray, reference: np.ndarray | None,
+                    box: OrientedBox | None, clean: CleanConfig, icp: IcpConfig) -> tuple[np.ndarray, Alignment, dict]:
+    """Align ``points`` to ``reference`` (None: it is the reference day) and clean it."""
+    try:
+        if reference is None:
+            alignment = Alignment(np.eye(4), 1.0, 0.0, None, "reference day")
+        else:
+            alignment = align_to_reference(points, reference, landmarks=scan.landmarks, plant_box=box, config=icp)
+        result = clean_scan(transform_points(points, alignment.transform), box, clean)
+    except PointCloudError as exc:
+        raise PointCloudError(f"{scan.path}: {exc}") from None
+    return result.points, alignment, result.counts
+
+
+def read_scan(path: Path, units: str) -> np.ndarray:
+    """A session scan in metres (``units`` "m", "mm" or "auto")."""
+    return read_point_cloud(path, units=units)
+
+
+def clean_greenhouse(source=None, output="data/greenhouse", *, manifest=None, landmarks=None,
+                     config_dir=None, units: str = "m", clean: CleanConfig = CleanConfig(),
+                     icp: IcpConfig = IcpConfig(), force: bool = False, progress: bool = True,
+                     log=print) -> pd.DataFrame:
+    """Clean every session found in ``source`` (or ``manifest``) and align it to its site's first day.
+
+    Writes the dataset described in the module docstring to ``output`` and returns its manifest.
+    Refuses to replace an existing dataset's manifest without ``force``.
+    """
+    from tqdm.auto import tqdm
+
+    output = Path(output)
+    if (output / "manifest.csv").exists() and not force:
+        raise DatasetError(f"{output}/manifest.csv exists: pass --force to rebuild the dataset")
+    found = find_sessions(source, manifest=manifest, landmarks=landmarks)
+    log(found.report())
+    sites = sorted({s.site for s in found.sessions})
+    boxes = {}
+    for site in sites:
+        boxes[site] = site_boxes(site, config_dir)
+        if boxes[site][0] is None:
+            raise InputFileError(f"no plant box for site {site!r}: put {site}_bbx_config.yaml in a folder "
+                                 "and pass it with --config (format: tpvp/data/greenhouse_row/room1_bbx_config.yaml)")
+    rows = []
+    with staged_update(output) as stage:
+        for site in sites:
+            config, config_path = boxes[site]
+            box = config["plant_box"]
+            shutil.copyfile(config_path, stage.path(f"config/{site}_bbx_config.yaml"))
+            reference = None
+            for scan in tqdm([s for s in found.sessions if s.site == site], desc=f"cleaning {site}",
+                             unit="session", disable=not progress):
+                points = read_scan(scan.path, units)
+                cleaned, alignment, counts = process_session(scan, points, reference, box, clean, icp)
+                if reference is None:
+                    reference, reference_date = points, scan.date
+                    write_point_cloud(stage.path(f"reference/{site}_static.pcd"),
+                                      voxel_downsample(points, icp.voxel_size / 2), dtype="float32")
+                write_session(stage, scan, cleaned, alignment)
+                rows.append(_session_row(scan, reference_date, counts, cleaned, box, alignment, units))
+                if alignment.fitness < 0.5:
+                    log(f"warning: {scan.name}: alignment fitness {alignment.fitness:.2f} < 0.5 "
+                        f"(RMSE {1000 * alignment.inlier_rmse:.1f} mm); check its landmarks")
+        table = pd.DataFrame(rows, columns=list(MANIFEST_COLUMNS))
+        stage_manifest(stage, table)
+    return table

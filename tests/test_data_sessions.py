@@ -1,0 +1,189 @@
+"""prepare-session: a new scan into a dataset - alignment, manifest, refusal to overwrite, no
+partial output on bad input or interruption, raw input untouched."""
+
+from __future__ import annotations
+
+import hashlib
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from data_tools import cli
+from data_tools.errors import DatasetError, InputFileError, PointCloudError
+from data_tools.greenhouse import clean_greenhouse
+from data_tools.sessions import prepare_session
+from data_tools.standin import write_raw_standin
+from tpvp.errors import ConfigError
+from tpvp.io import read_point_cloud, write_point_cloud
+from tpvp.scene.boxes import room_config
+
+
+def tree_digest(folder: Path) -> dict:
+    return {str(p.relative_to(folder)): hashlib.sha256(p.read_bytes()).hexdigest()
+            for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+@pytest.fixture(scope="module")
+def standin(tmp_path_factory):
+    return write_raw_standin(tmp_path_factory.mktemp("raw"), n_sessions=3)
+
+
+@pytest.fixture(scope="module")
+def base_dataset(standin, tmp_path_factory):
+    """A dataset cleaned from the first two sessions; the third is the user's new scan."""
+    out = tmp_path_factory.mktemp("ds") / "dataset"
+    manifest = standin.folder / "two.csv"
+    manifest.write_text("site,date,file,landmarks\nroom1,2025-09-15,raw/room1_20250915_raw.ply,\n"
+                        "room1,2025-09-18,raw/room1_20250918_raw.ply,landmarks/room1_20250918.csv\n")
+    clean_greenhouse(None, out, manifest=manifest, progress=False, log=lambda *_: None)
+    return out
+
+
+@pytest.fixture
+def dataset(base_dataset, tmp_path):
+    import shutil
+
+    return Path(shutil.copytree(base_dataset, tmp_path / "dataset"))
+
+
+def corner_shift(transform, truth) -> float:
+    corners = room_config("room1").plant_box.corners()
+    apply = lambda t: corners @ t[:3, :3].T + t[:3, 3]  # noqa: E731
+    return float(np.linalg.norm(apply(transform) - apply(truth), axis=1).max())
+
+
+def test_new_session_is_aligned_cleaned_and_appended(standin, dataset):
+    scan = standin.scans["20250922"]
+    raw_before = hashlib.sha256(scan.read_bytes()).hexdigest()
+    row = prepare_session(dataset, "room1", "2025-09-22", scan, landmarks=standin.landmarks["20250922"])
+    assert hashlib.sha256(scan.read_bytes()).hexdigest() == raw_before
+    table = pd.read_csv(dataset / "manifest.csv")
+    assert list(table["date"]) == ["2025-09-15", "2025-09-18", "2025-09-22"]
+    assert row["reference_date"] == "2025-09-15" and row["alignment"] == "landmarks+icp(static)"
+    assert row["fitness"] > 0.9
+    transform = np.loadtxt(dataset / row["transform_file"])
+    assert corner_shift(transform, np.linalg.inv(standin.offsets["20250922"])) < 0.005
+    model = read_point_cloud(dataset / row["file"], units="m")
+    assert len(model) == row["points"] and room_config("room1").plant_box.contains(model, tol=1e-4).all()
+    assert pd.read_parquet(dataset / "manifest.parquet")["date"].tolist() == table["date"].tolist()
+    assert not list(dataset.glob(".staging-*"))
+
+
+def test_existing_session_needs_force(standin, dataset, capsys):
+    before = tree_digest(dataset)
+    args = ["prepare-session", "--dataset", str(dataset), "--site", "room1", "--date", "2025-09-18",
+            "--scan", str(standin.scans["20250918"]), "--landmarks", str(standin.landmarks["20250918"])]
+    assert cli.main(args) == 2
+    err = capsys.readouterr().err
+    assert "already exists" in err and "--force" in err and err.count("\n") == 1
+    assert tree_digest(dataset) == before
+    assert cli.main(args + ["--force"]) == 0
+    table = pd.read_csv(dataset / "manifest.csv")
+    assert list(table["date"]) == ["2025-09-15", "2025-09-18"]
+
+
+def test_interruption_mid_write_leaves_the_dataset_as_it_was(standin, dataset, monkeypatch):
+    import data_tools.sessions as sessions
+
+    before = tree_digest(dataset)
+    real = sessions.write_session
+
+    def half_written(stage, scan, cleaned, alignment):
+        real(stage, scan, cleaned, alignment)
+        stage.path("manifest.csv").write_text("site,date\nroom1,")  # killed while writing the manifest
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(sessions, "write_session", half_written)
+    with pytest.raises(KeyboardInterrupt):
+        prepare_session(dataset, "room1", "2025-09-22", standin.scans["20250922"],
+                        landmarks=standin.landmarks["20250922"])
+    assert tree_digest(dataset) == before
+
+
+def test_interruption_while_moving_files_into_place_is_rolled_back(standin, dataset, monkeypatch):
+    import data_tools.staging as staging
+
+    before = tree_digest(dataset)
+    real_replace = staging.os.replace
+
+    def replace(src, dst):
+        if Path(dst).name == "manifest.csv" and ".staging-" in str(src):
+            raise KeyboardInterrupt  # after the model and transform were moved in
+        real_replace(src, dst)
+
+    monkeypatch.setattr(staging.os, "replace", replace)
+    with pytest.raises(KeyboardInterrupt):
+        prepare_session(dataset, "room1", "2025-09-18", standin.scans["20250918"],
+                        landmarks=standin.landmarks["20250918"], force=True)
+    assert tree_digest(dataset) == before
+
+
+def test_first_session_of_a_site_starts_a_dataset(standin, tmp_path):
+    row = prepare_session(tmp_path / "new", "room1", "20250915", standin.scans["20250915"])
+    assert row["alignment"] == "reference day" and row["reference_date"] == "2025-09-15"
+    assert (tmp_path / "new" / "reference" / "room1_static.pcd").is_file()
+    assert (tmp_path / "new" / "config" / "room1_bbx_config.yaml").is_file()
+    row = prepare_session(tmp_path / "new", "room1", "2025-09-18", standin.scans["20250918"],
+                          landmarks=standin.landmarks["20250918"])
+    assert corner_shift(np.loadtxt(tmp_path / "new" / row["transform_file"]),
+                        np.linalg.inv(standin.offsets["20250918"])) < 0.005
+
+
+def test_site_without_box_is_cleaned_without_crop(tmp_path):
+    rng = np.random.default_rng(0)
+    plant = rng.normal(0, 0.05, (5000, 3))
+    write_point_cloud(tmp_path / "plant.ply", plant)
+    row = prepare_session(tmp_path / "ds", "bench3", "2025-10-02", tmp_path / "plant.ply")
+    assert row["points_cropped"] == row["points_raw"] == 5000 and row["points"] > 4000
+
+
+def bad_inputs(folder: Path, standin) -> list:
+    good = read_point_cloud(standin.scans["20250922"], units="m")
+    write_point_cloud(folder / "trunc.ply", good[:1000])
+    data = (folder / "trunc.ply").read_bytes()
+    (folder / "trunc.ply").write_bytes(data[: len(data) - 5000])
+    (folder / "header.ply").write_bytes(b"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nend_header\n1\n2\n3\n")
+    (folder / "empty.pcd").write_bytes(b"")
+    nan = good[:100].copy()
+    nan[3, 1] = np.nan
+    (folder / "nan.xyz").write_text("\n".join(" ".join(map(str, p)) for p in nan))
+    write_point_cloud(folder / "mm.ply", good * 1000.0)
+    few = folder / "few.csv"
+    few.write_text("source_x,source_y,source_z,target_x,target_y,target_z\n0,0,0,0,0,0\n1,0,0,1,0,0\n")
+    scan = standin.scans["20250922"]
+    return [  # (scan, landmarks, units, error type, file named, words)
+        (folder / "trunc.ply", None, "m", InputFileError, folder / "trunc.ply", "truncated"),
+        (folder / "header.ply", None, "m", InputFileError, folder / "header.ply", "property"),
+        (folder / "empty.pcd", None, "m", InputFileError, folder / "empty.pcd", "empty"),
+        (folder / "nan.xyz", None, "m", PointCloudError, folder / "nan.xyz", "NaN"),
+        (folder / "mm.ply", None, "m", PointCloudError, folder / "mm.ply", "millimetres"),
+        (scan, few, "m", InputFileError, few, "at least 3"),
+        (folder / "missing.ply", None, "m", InputFileError, folder / "missing.ply", "not found"),
+    ]
+
+
+def test_bad_input_gives_one_clear_error_and_no_partial_output(standin, dataset, tmp_path):
+    before = tree_digest(dataset)
+    for scan, landmarks, units, error, named, words in bad_inputs(tmp_path, standin):
+        with pytest.raises(error) as info:
+            prepare_session(dataset, "room1", "2025-09-22", scan, landmarks=landmarks, units=units)
+        message = str(info.value)
+        assert str(named) in message and words.lower() in message.lower() and "\n" not in message, message
+        assert tree_digest(dataset) == before
+
+
+def test_millimetre_scan_of_a_new_site_is_caught_by_the_units_check(tmp_path):
+    write_point_cloud(tmp_path / "row_mm.ply", room_config("room1").plant_box.sample_uniform(500, 0) * 1000)
+    with pytest.raises(PointCloudError, match="millimetres"):
+        prepare_session(tmp_path / "ds", "room1", "2025-09-15", tmp_path / "row_mm.ply")
+    assert not (tmp_path / "ds").exists()
+
+
+def test_bad_date_and_manifest(standin, dataset):
+    with pytest.raises(ConfigError, match="YYYY-MM-DD"):
+        prepare_session(dataset, "room1", "2025-13-40", standin.scans["20250922"])
+    (dataset / "manifest.csv").write_text("site,date\nroom1,2025-09-15\n")
+    with pytest.raises(DatasetError, match="missing column"):
+        prepare_session(dataset, "room1", "2025-09-22", standin.scans["20250922"])
