@@ -15,6 +15,7 @@ Output (:func:`clean_greenhouse`), a dataset folder the notebooks and ``prepare-
     reference/<site>_static.pcd                the first day's full scan (downsampled), to align
                                                later sessions on its static structure
     config/<site>_bbx_config.yaml              the plant/view boxes used for cropping
+    report/<site>_sessions.png                 side and top views of every cleaned session
     manifest.csv (+ .parquet)                  one row per session, see MANIFEST_COLUMNS
 
 The whole output is staged and committed at the end (:mod:`data_tools.staging`): an interrupted
@@ -40,9 +41,10 @@ from data_tools.staging import staged_update
 from tpvp.io import READ_EXTENSIONS, read_point_cloud, write_point_cloud
 from tpvp.scene.boxes import DATA_DIR as BUNDLED_CONFIG_DIR
 from tpvp.scene.boxes import OrientedBox, read_bbx_config
+from tpvp.viz import plot_row_sessions
 
 PROCESSED_FOLDER = "Processed_3D_Model"
-SESSION_NAME = re.compile(r"(?P<site>room\d+)[_\-. ]?(?P<date>20\d\d-?\d\d-?\d\d)", re.IGNORECASE)
+SESSION_NAME = re.compile(r"(?P<site>room\d+)[_\-. /]?(?P<date>20\d\d-?\d\d-?\d\d)", re.IGNORECASE)
 MANIFEST_COLUMNS = (
     "site", "date", "file", "source", "reference_date", "transform_file",
     "points_raw", "points_cropped", "points_supports_removed", "points_outliers_removed",
@@ -114,11 +116,20 @@ def _landmarks_for(landmarks_dir: Path | None, site: str, date: dt.date) -> Path
     return found[0] if found else None
 
 
-def find_sessions(source, *, manifest=None, landmarks=None) -> Discovery:
+def _session_match(relative: str):
+    """The room/date match in a path relative to the source, nearest the file name (so both
+    ``room1_20250918_raw.ply`` and ``room1/20250918/pointcloud.ply`` name their session)."""
+    matches = list(SESSION_NAME.finditer(relative))
+    return matches[-1] if matches else None
+
+
+def find_sessions(source, *, manifest=None, landmarks=None, exclude=None) -> Discovery:
     """Find the session scans in ``source`` (a folder), or those listed in ``manifest`` (a CSV).
 
-    ``landmarks``: a folder of landmark files named like the sessions (``room1_20250918*.csv``).
-    When a session has several files, the processed model is kept (then point clouds before
+    A scan's room and date are read from its name or, failing that, its folders
+    (``room1/20250918/scan.ply``). ``landmarks``: a folder of landmark files named like the
+    sessions (``room1_20250918*.csv``). ``exclude``: a folder to ignore (the output of an earlier
+    run). When a session has several files, the processed model is kept (then point clouds before
     meshes); the others are reported as skipped.
     """
     landmarks_dir = Path(landmarks) if landmarks is not None else None
@@ -130,23 +141,24 @@ def find_sessions(source, *, manifest=None, landmarks=None) -> Discovery:
     if not source.is_dir():
         raise InputFileError(f"{source}: folder not found" if not source.exists() else
                              f"{source}: not a folder (pass the folder holding the session scans, or --manifest)")
+    ignored = [p.resolve() for p in (landmarks_dir, exclude) if p is not None]
     candidates: dict[tuple[str, dt.date], list[Path]] = {}
     skipped = []
     for path in sorted(p for p in source.rglob("*") if p.is_file()):
-        rel = str(path.relative_to(source))
+        rel = path.relative_to(source).as_posix()
         if any(part.startswith(".") for part in path.relative_to(source).parts):
             continue  # hidden files and our own staging folders
-        if landmarks_dir is not None and landmarks_dir.resolve() in path.resolve().parents:
+        if any(folder in path.resolve().parents for folder in ignored):
             continue
         if path.suffix.lower() not in READ_EXTENSIONS:
             skipped.append((rel, f"not a point cloud or mesh ({path.suffix or 'no extension'})"))
             continue
-        match = SESSION_NAME.search(path.name)
         if "landmark" in path.name.lower():
             skipped.append((rel, "a landmarks file (pass its folder with --landmarks)"))
             continue
+        match = _session_match(rel)
         if not match:
-            skipped.append((rel, "name holds no room and date (expected e.g. room1_20250918*.ply)"))
+            skipped.append((rel, "path holds no room and date (expected e.g. room1_20250918*.ply)"))
             continue
         try:
             date = parse_date(match["date"])
@@ -158,7 +170,8 @@ def find_sessions(source, *, manifest=None, landmarks=None) -> Discovery:
     for (site, date), paths in sorted(candidates.items()):
         ranked = sorted(paths, key=lambda p: (not _is_processed(p, site, date), _EXT_RANK.get(p.suffix.lower(), 99), str(p)))
         for other in ranked[1:]:
-            skipped.append((str(other.relative_to(source)), f"another file of {site} {date} was used: {ranked[0].name}"))
+            skipped.append((other.relative_to(source).as_posix(),
+                            f"another file of {site} {date} was used: {ranked[0].relative_to(source).as_posix()}"))
         sessions.append(SessionScan(site, date, ranked[0], _landmarks_for(landmarks_dir, site, date)))
     if not sessions:
         raise InputFileError(f"{source}: no session scans found (expected files named like room1_20250918*.ply "
@@ -251,6 +264,13 @@ def read_scan(path: Path, units: str) -> np.ndarray:
     return read_point_cloud(path, units=units)
 
 
+def _refuse_output_over_input(output: Path, inputs: list[Path]) -> None:
+    for item in inputs:
+        if output.resolve() == item.resolve() or output.resolve() in item.resolve().parents:
+            raise ConfigError(f"{output}: the output folder holds the input {item}; raw data is never "
+                              "modified - choose another --output")
+
+
 def clean_greenhouse(source=None, output="data/greenhouse", *, manifest=None, landmarks=None,
                      config_dir=None, units: str = "m", clean: CleanConfig = CleanConfig(),
                      icp: IcpConfig = IcpConfig(), force: bool = False, progress: bool = True,
@@ -265,7 +285,10 @@ def clean_greenhouse(source=None, output="data/greenhouse", *, manifest=None, la
     output = Path(output)
     if (output / "manifest.csv").exists() and not force:
         raise DatasetError(f"{output}/manifest.csv exists: pass --force to rebuild the dataset")
-    found = find_sessions(source, manifest=manifest, landmarks=landmarks)
+    if manifest is None and source is not None:
+        _refuse_output_over_input(output, [Path(source)])
+    found = find_sessions(source, manifest=manifest, landmarks=landmarks, exclude=output)
+    _refuse_output_over_input(output, [scan.path for scan in found.sessions])
     log(found.report())
     sites = sorted({s.site for s in found.sessions})
     boxes = {}
@@ -280,7 +303,7 @@ def clean_greenhouse(source=None, output="data/greenhouse", *, manifest=None, la
             config, config_path = boxes[site]
             box = config["plant_box"]
             shutil.copyfile(config_path, stage.path(f"config/{site}_bbx_config.yaml"))
-            reference = None
+            reference, models, titles = None, [], []
             for scan in tqdm([s for s in found.sessions if s.site == site], desc=f"cleaning {site}",
                              unit="session", disable=not progress):
                 points = read_scan(scan.path, units)
@@ -291,9 +314,14 @@ def clean_greenhouse(source=None, output="data/greenhouse", *, manifest=None, la
                                       voxel_downsample(points, icp.voxel_size / 2), dtype="float32")
                 write_session(stage, scan, cleaned, alignment)
                 rows.append(_session_row(scan, reference_date, counts, cleaned, box, alignment, units))
+                models.append(cleaned)
+                titles.append(f"{scan.date}  {len(cleaned):,} points\n{alignment.method}, fitness "
+                              f"{alignment.fitness:.2f}, RMSE {1000 * alignment.inlier_rmse:.1f} mm")
                 if alignment.fitness < 0.5:
                     log(f"warning: {scan.name}: alignment fitness {alignment.fitness:.2f} < 0.5 "
                         f"(RMSE {1000 * alignment.inlier_rmse:.1f} mm); check its landmarks")
+            plot_row_sessions(stage.path(f"report/{site}_sessions.png"), models, titles, box,
+                              f"{site}: cleaned sessions in the plant-box frame (side and top views)")
         table = pd.DataFrame(rows, columns=list(MANIFEST_COLUMNS))
         stage_manifest(stage, table)
     return table

@@ -21,9 +21,10 @@ import pandas as pd
 
 from data_tools.alignment import IcpConfig
 from data_tools.cleaning import CleanConfig, voxel_downsample
-from data_tools.errors import DatasetError, InputFileError, PointCloudError
+from data_tools.errors import ConfigError, DatasetError, InputFileError, PointCloudError
 from data_tools.greenhouse import (
     MANIFEST_COLUMNS,
+    PROCESSED_FOLDER,
     SessionScan,
     _session_row,
     parse_date,
@@ -72,10 +73,13 @@ def prepare_session(dataset, site: str, date, scan, *, landmarks=None, units: st
     if len(existing) and not force:
         raise DatasetError(f"session {site} {date} already exists in {manifest_path} "
                            f"({existing.iloc[0]['file']}); pass --force to replace it")
+    session = SessionScan(site, date, scan, Path(landmarks) if landmarks is not None else None)
+    if scan.resolve().parent.parent == dataset.resolve() and scan.parent.name in ("reference", PROCESSED_FOLDER):
+        raise ConfigError(f"{scan}: a file of the dataset itself; raw scans are never modified - "
+                          "prepare a scan from outside the dataset")
     boxes, config_path = site_boxes(site, dataset / "config")
     box = boxes["plant_box"] if boxes is not None else None
     points = read_scan(scan, units)
-    session = SessionScan(site, date, scan, Path(landmarks) if landmarks is not None else None)
     references = mine[mine["date"] == mine["reference_date"]]
     is_reference = len(references) == 0 or (len(existing) and existing.iloc[0]["date"] == existing.iloc[0]["reference_date"])
     if is_reference:

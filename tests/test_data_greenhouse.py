@@ -65,9 +65,15 @@ def test_find_sessions_reports_what_was_found_and_skipped(tmp_path):
     assert [(s.site, str(s.date), s.path.name) for s in found.sessions] == [
         ("room1", "2025-09-15", "room1_20250915.pcd"), ("room4", "2025-09-18", "room4-2025-09-18.ply")]
     skipped = dict(found.skipped)
-    assert "another file of room1 2025-09-15 was used: room1_20250915.pcd" in skipped["captures/room1_20250915_polycam.ply"]
+    assert "another file of room1 2025-09-15 was used: Processed_3D_Model/room1_20250915.pcd" in skipped["captures/room1_20250915_polycam.ply"]
     assert "room4-2025-09-18.ply" in skipped["captures/room4_20250918_mesh.obj"]
     assert "no room and date" in skipped["captures/plant_scan.ply"]
+    assert [str(s.date) for s in find_sessions(tmp_path / "captures").sessions] == ["2025-09-15", "2025-09-18"]
+    # Polycam-style folders: the session is named by the folders, the file name is generic.
+    write_point_cloud(tmp_path / "polycam" / "room4" / "2025-09-22" / "pointcloud.ply", cloud)
+    write_point_cloud(tmp_path / "polycam" / "room4_20250925" / "pointcloud.ply", cloud)
+    assert [(s.site, str(s.date)) for s in find_sessions(tmp_path / "polycam").sessions] == [
+        ("room4", "2025-09-22"), ("room4", "2025-09-25")]
     assert "not a valid date" in skipped["captures/room1_20251345.ply"]
     assert "not a point cloud" in skipped["captures/room1_20250915.jpg"]
     assert "landmarks file" in skipped["captures/room4_20250918_landmarks.csv"]
@@ -176,6 +182,8 @@ def test_clean_raw_captures_recovers_offsets_keeps_plants_removes_background(raw
     saved = pd.read_csv(out / "manifest.csv")
     assert len(saved) == 3 and (out / "manifest.parquet").is_file()
     assert (out / "config" / "room1_bbx_config.yaml").is_file() and (out / "reference" / "room1_static.pcd").is_file()
+    figure = (out / "report" / "room1_sessions.png").read_bytes()
+    assert figure.startswith(b"\x89PNG") and len(figure) > 20_000
     assert not list(out.glob(".staging-*"))
 
 
@@ -270,6 +278,18 @@ def test_scans_in_millimetres_clean_with_units_mm(tmp_path):
     table = clean_greenhouse(standin.folder, tmp_path / "out", units="mm", progress=False, log=quiet)
     assert table["points"].iloc[0] > 0.8 * standin.plant_points / 1.2
     assert table["extent_z"].iloc[0] < 2.4
+
+
+def test_output_inside_the_source_is_ignored_and_never_overwrites_input(tmp_path):
+    folder = write_processed_standin(tmp_path / "kaggle", n_sessions=1)
+    inside = tmp_path / "kaggle" / "clean"
+    first = clean_greenhouse(tmp_path / "kaggle", inside, progress=False, log=quiet)
+    again = clean_greenhouse(tmp_path / "kaggle", inside, force=True, progress=False, log=quiet)
+    assert list(again["source"]) == list(first["source"]) == [str(folder / "room1_20250915.pcd")]
+    before = tree_digest(folder)
+    with pytest.raises(ConfigError, match="raw data is never modified"):
+        clean_greenhouse(tmp_path / "kaggle", tmp_path / "kaggle", force=True, progress=False, log=quiet)
+    assert tree_digest(folder) == before
 
 
 def test_site_without_box_configuration(tmp_path):

@@ -82,6 +82,10 @@ def test_existing_session_needs_force(standin, dataset, capsys):
     assert cli.main(args + ["--force"]) == 0
     table = pd.read_csv(dataset / "manifest.csv")
     assert list(table["date"]) == ["2025-09-15", "2025-09-18"]
+    # The dataset's own model cannot be its own new raw scan (it would be overwritten).
+    own = dataset / table["file"].iloc[1]
+    with pytest.raises(ConfigError, match="raw scans are never modified"):
+        prepare_session(dataset, "room1", "2025-09-18", own, force=True)
 
 
 def test_interruption_mid_write_leaves_the_dataset_as_it_was(standin, dataset, monkeypatch):

@@ -83,3 +83,33 @@ def plot_coverage(path, voxel_centres, covered, observable, title="") -> Path:
             ax.legend(loc="upper left", fontsize=7, markerscale=4)
     fig.suptitle(title, fontsize=10)
     return _save(fig, path)
+
+
+def plot_row_sessions(path, sessions, titles, box=None, title="") -> Path:
+    """Side view (along the row, x-z) and top view (x-y) of every session of a row, one column per
+    session, in the plant-box frame when ``box`` is given; colour = height."""
+    sessions = [np.asarray(s).reshape(-1, 3) for s in sessions]
+    local = [box.to_local(s) if box is not None else s for s in sessions]
+    allpts = np.concatenate(local)
+    lo, hi = allpts.min(axis=0), allpts.max(axis=0)
+    span = np.maximum(hi - lo, 0.2)
+    inch_per_m = 3.2 / span[0]  # each column is 3.2 inches wide; keep the views to scale
+    fig, axes = plt.subplots(2, len(local), figsize=(3.2 * len(local), inch_per_m * (span[2] + span[1]) + 1.6),
+                             squeeze=False, gridspec_kw={"height_ratios": [span[2], span[1]]})
+    for k, (points, label) in enumerate(zip(local, titles)):
+        (points,) = _subsample(points, limit=20000)
+        for row, (j, name) in enumerate(((2, "z"), (1, "y"))):
+            ax = axes[row, k]
+            ax.scatter(points[:, 0], points[:, j], s=0.2, c=points[:, 2], cmap="viridis",
+                       vmin=lo[2], vmax=hi[2], linewidths=0)
+            ax.set_xlim(lo[0], hi[0])
+            ax.set_ylim(lo[j], hi[j])
+            ax.set_aspect("equal")
+            ax.tick_params(labelsize=6)
+            if row == 1:
+                ax.set_xlabel("x along the row (m)", fontsize=7)
+            if k == 0:
+                ax.set_ylabel(f"{name} (m)", fontsize=7)
+        axes[0, k].set_title(label, fontsize=7)
+    fig.suptitle(title, fontsize=9)
+    return _save(fig, path)
