@@ -13,7 +13,6 @@ six numbers per line without a header; ``#`` starts a comment. Metres.
 
 from __future__ import annotations
 
-import io
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -21,6 +20,7 @@ import numpy as np
 
 from data_tools.errors import ConfigError, InputFileError, PointCloudError
 from tpvp.errors import checked_cloud
+from tpvp.io import read_text_table
 
 LANDMARK_COLUMNS = ("source_x", "source_y", "source_z", "target_x", "target_y", "target_z")
 #: Fewest pairs that fix a rigid transform (three non-collinear points).
@@ -97,48 +97,20 @@ def rigid_from_pairs(source: np.ndarray, target: np.ndarray) -> np.ndarray:
 def read_landmarks(path) -> tuple[np.ndarray, np.ndarray]:
     """Read a landmarks file; returns ``(source (K, 3), target (K, 3))`` with K >= 3."""
     path = Path(path)
-    if not path.is_file():
-        raise InputFileError(f"{path}: landmarks file not found")
-    try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputFileError(f"{path}: cannot read landmarks ({exc})") from None
-    lines = [ln.split("#", 1)[0].strip() for ln in text.splitlines()]
-    lines = [ln for ln in lines if ln]
-    if lines and not _is_number(lines[0].replace(",", " ").split()[0]):
-        names = [c.strip().lower() for c in lines[0].replace(",", " ").split()]
+    table, names = read_text_table(path, count_header=False, names=True)
+    if names is not None:
         missing = [c for c in LANDMARK_COLUMNS if c not in names]
         if missing:
             raise InputFileError(f"{path}: landmarks header lacks {', '.join(missing)} "
                                  f"(expected {','.join(LANDMARK_COLUMNS)})")
-        order = [names.index(c) for c in LANDMARK_COLUMNS]
-        lines = lines[1:]
-    else:
-        order = list(range(6))
-    if not lines:
-        raise InputFileError(f"{path}: no landmark pairs (at least {MIN_LANDMARKS} needed)")
-    try:
-        table = np.loadtxt(io.StringIO("\n".join(ln.replace(",", " ") for ln in lines)), ndmin=2)
-    except ValueError as exc:
-        raise InputFileError(f"{path}: landmarks must be rows of numbers ({exc})") from None
-    if table.shape[1] < max(order) + 1:
+        table = table[:, [names.index(c) for c in LANDMARK_COLUMNS]] if len(table) else table
+    elif len(table) and table.shape[1] != 6:
         raise InputFileError(f"{path}: each landmark row needs 6 numbers (source xyz, target xyz), "
                              f"got {table.shape[1]}")
-    table = table[:, order]
-    if not np.isfinite(table).all():
-        raise InputFileError(f"{path}: landmarks contain NaN or infinite values")
     if len(table) < MIN_LANDMARKS:
         raise InputFileError(f"{path}: {len(table)} landmark pair(s), at least {MIN_LANDMARKS} "
                              "non-collinear pairs are needed")
     return table[:, :3], table[:, 3:]
-
-
-def _is_number(token: str) -> bool:
-    try:
-        float(token)
-    except ValueError:
-        return False
-    return True
 
 
 def landmark_transform(path) -> tuple[np.ndarray, float]:

@@ -9,6 +9,8 @@ import argparse
 import sys
 from pathlib import Path
 
+from data_tools.kaggle_download import KAGGLE_DATASET
+from tpvp.cli import run_command
 from tpvp.errors import TpvpError
 
 
@@ -124,7 +126,7 @@ def build_parser() -> argparse.ArgumentParser:
     green = sub.add_parser("greenhouse", help="the greenhouse multi-session row dataset").add_subparsers(dest="action", required=True)
     p = green.add_parser("download", help="download the dataset from Kaggle (needs an API token)")
     p.add_argument("--output", default="data/greenhouse_raw", help="download folder (default: %(default)s)")
-    p.add_argument("--dataset", default="sicongpan/greenhouse-multi-session-row-dataset")
+    p.add_argument("--dataset", default=KAGGLE_DATASET, help="Kaggle dataset (default: %(default)s)")
     p.add_argument("--no-unzip", action="store_true")
     p.add_argument("--force", action="store_true", help="download again even if complete")
     p.set_defaults(func=_greenhouse_download)
@@ -160,16 +162,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
-    try:
-        return args.func(args)
-    except TpvpError as exc:
-        name = " ".join(x for x in (args.command, getattr(args, "action", None)) if x)
-        print(f"data_tools {name}: error: {exc}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print("interrupted: outputs are only moved into place at the end, so none is half-written",
-              file=sys.stderr)
-        return 130
+    name = " ".join(x for x in (args.command, getattr(args, "action", None)) if x)
+    return run_command(args, f"data_tools {name}")
 
 
 if __name__ == "__main__":

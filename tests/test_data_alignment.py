@@ -88,12 +88,13 @@ def test_read_landmarks_with_header_comments_and_permuted_columns(tmp_path):
 
 @pytest.mark.parametrize("text, match", [
     (HEADER + "0,0,0,0,0,0\n1,0,0,1,0,0\n", "2 landmark pair(s), at least 3"),
-    ("", "no landmark pairs"),
+    ("", "empty file"),
+    (HEADER, "0 landmark pair(s), at least 3"),
     ("source_x,source_y,target_x\n", "lacks source_z, target_y, target_z"),
     (HEADER + "0,0,0,0,0,0\n1,0,nan,1,0,0\n0,1,0,0,1,0\n", "NaN"),
     ("0 0 0 0 0\n1 0 0 1 0\n0 1 0 0 1\n", "6 numbers"),
     (HEADER + "0,0,0,0,0,0\n1,0,0,1,0,0\n2,0,0,2,0,0\n", "collinear"),
-    (HEADER + "0,0,zero,0,0,0\n", "rows of numbers"),
+    (HEADER + "0,0,zero,0,0,0\n", "line 2: non-numeric value 'zero'"),
 ])
 def test_bad_landmark_files_give_one_line_error_naming_the_file(tmp_path, text, match):
     path = tmp_path / "room1_20250918.csv"
@@ -105,7 +106,7 @@ def test_bad_landmark_files_give_one_line_error_naming_the_file(tmp_path, text, 
 
 
 def test_missing_landmarks_file(tmp_path):
-    with pytest.raises(InputFileError, match="landmarks file not found"):
+    with pytest.raises(InputFileError, match="none.csv: file not found"):
         read_landmarks(tmp_path / "none.csv")
 
 

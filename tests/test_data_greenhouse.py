@@ -7,7 +7,6 @@ greenhouse structure, outliers, known rigid offsets and landmark files), go thro
 
 from __future__ import annotations
 
-import hashlib
 import sys
 import types
 from pathlib import Path
@@ -18,21 +17,16 @@ import pytest
 from scipy.spatial import cKDTree
 
 from data_tools import cli
-from data_tools.cleaning import CleanConfig, clean_scan, find_support_planes, fragment_mask
+from data_tools.cleaning import clean_scan, find_support_planes, fragment_mask
 from data_tools.errors import CredentialsError, DatasetError, InputFileError, PointCloudError
 from data_tools.greenhouse import MANIFEST_COLUMNS, clean_greenhouse, find_sessions, parse_date
 from data_tools.kaggle_download import download_greenhouse, find_kaggle_credentials
 from data_tools.standin import static_structure, write_processed_standin, write_raw_standin
 from tpvp.errors import ConfigError
+from helpers import tree_digest
 from tpvp.io import read_point_cloud, write_point_cloud
 from tpvp.scene.boxes import room_config
 from tpvp.scene.greenhouse import generate_row
-
-
-def tree_digest(folder: Path) -> dict:
-    """Every file under ``folder`` (hidden ones included) with the hash of its bytes."""
-    return {str(p.relative_to(folder)): hashlib.sha256(p.read_bytes()).hexdigest()
-            for p in sorted(folder.rglob("*")) if p.is_file()}
 
 
 def quiet(*_):

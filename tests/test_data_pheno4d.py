@@ -332,14 +332,12 @@ def test_download_pheno4d_from_local_server(raw, tmp_path):
 
 
 def test_interrupted_forced_run_leaves_the_dataset_as_it_was(raw, tmp_path, monkeypatch):
-    import hashlib
-
     import data_tools.pheno4d as pheno4d
+    from helpers import tree_digest
 
     out = tmp_path / "dataset"
     _prepare(raw["folder"], out)
-    digest = lambda: {p: hashlib.sha256(p.read_bytes()).hexdigest() for p in sorted(out.rglob("*")) if p.is_file()}  # noqa: E731
-    before = digest()
+    before = tree_digest(out)
 
     def interrupted(*_args):
         raise KeyboardInterrupt  # every scan is written (staged), the manifest is not
@@ -347,4 +345,4 @@ def test_interrupted_forced_run_leaves_the_dataset_as_it_was(raw, tmp_path, monk
     monkeypatch.setattr(pheno4d, "session_pairs", interrupted)
     with pytest.raises(KeyboardInterrupt):
         _prepare(raw["zip"], out, force=True)
-    assert digest() == before
+    assert tree_digest(out) == before

@@ -16,13 +16,9 @@ from data_tools.greenhouse import clean_greenhouse
 from data_tools.sessions import prepare_session
 from data_tools.standin import write_raw_standin
 from tpvp.errors import ConfigError
+from helpers import tree_digest
 from tpvp.io import read_point_cloud, write_point_cloud
 from tpvp.scene.boxes import room_config
-
-
-def tree_digest(folder: Path) -> dict:
-    return {str(p.relative_to(folder)): hashlib.sha256(p.read_bytes()).hexdigest()
-            for p in sorted(folder.rglob("*")) if p.is_file()}
 
 
 @pytest.fixture(scope="module")

@@ -124,13 +124,22 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def main(argv=None) -> int:
-    args = build_parser().parse_args(argv)
+def run_command(args, name: str) -> int:
+    """Run ``args.func(args)``; a TpvpError becomes one line ``<name>: error: ...`` on stderr and
+    exit status 2, Ctrl-C exit status 130 (outputs are written atomically, none is half-written)."""
     try:
         return args.func(args)
     except TpvpError as exc:
-        print(f"tpvp {args.command}: error: {exc}", file=sys.stderr)
+        print(f"{name}: error: {exc}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        print(f"{name}: interrupted; outputs are written atomically, none is half-written", file=sys.stderr)
+        return 130
+
+
+def main(argv=None) -> int:
+    args = build_parser().parse_args(argv)
+    return run_command(args, f"tpvp {args.command}")
 
 
 if __name__ == "__main__":

@@ -309,20 +309,22 @@ def _parse_text_table(path, data: bytes, *, count_header="auto", allow_names=Fal
     return arr, names
 
 
-def read_text_table(path, columns: int | None = None, count_header="auto") -> np.ndarray:
+def read_text_table(path, columns: int | None = None, count_header="auto", *, names: bool = False):
     """Read a whitespace- or comma-separated numeric table as float64 (N, C).
 
     ``count_header``: "auto" treats a first line holding one integer as the row count when the
     other rows have 2+ columns (or when it equals the number of rows of a 1-column table);
     True requires it, False never uses it. A declared count must match. ``columns`` requires that
     many columns. A file holding a single number returns shape (1, 1). '#' starts a comment.
+    With ``names`` a first line of column names is allowed and ``(table, lower-case names or
+    None)`` is returned.
     """
     if count_header not in ("auto", True, False):
         raise ConfigError(f"count_header must be 'auto', True or False, got {count_header!r}")
     if columns is not None and (not isinstance(columns, (int, np.integer)) or columns < 1):
         raise ConfigError(f"columns must be a positive integer or None, got {columns!r}")
     path = Path(path)
-    arr, _ = _parse_text_table(path, _read_bytes(path), count_header=count_header)
+    arr, header = _parse_text_table(path, _read_bytes(path), count_header=count_header, allow_names=names)
     if columns is not None and len(arr) and arr.shape[1] != columns:
         raise InputFileError(f"{path}: has {arr.shape[1]} columns, expected {columns}")
     if columns is not None and not len(arr):
@@ -330,7 +332,7 @@ def read_text_table(path, columns: int | None = None, count_header="auto") -> np
     if not np.isfinite(arr).all():
         row = int(np.flatnonzero(~np.isfinite(arr).all(axis=1))[0])
         raise InputFileError(f"{path}: data row {row + 1} holds a NaN/inf value")
-    return arr
+    return (arr, header) if names else arr
 
 
 def _read_text_cloud(path: Path, return_labels: bool):
