@@ -30,8 +30,10 @@ def _pheno4d_prepare(args) -> int:
     table = prepare_pheno4d(args.source, args.output, config, force=args.force)
     where = args.source or "the bundled real samples"
     skipped = table.attrs.get("skipped", [])
-    for name, why in skipped:
+    for name, why in skipped[:10]:
         print(f"  skipped {name}: {why}")
+    if len(skipped) > 10:
+        print(f"  ... and {len(skipped) - 10} more skipped file(s), all listed in {args.output}/NOTICE.md")
     print(f"prepared {len(table)} scan(s) of {table['plant'].nunique()} plant(s) and "
           f"{len(table.attrs.get('pairs', []))} session pair(s) from {where} into {args.output}/ "
           f"(manifest.csv, pairs.csv){f'; skipped {len(skipped)} file(s)' if skipped else ''}")

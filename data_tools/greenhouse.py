@@ -259,11 +259,6 @@ def process_session(scan: SessionScan, points: np.ndarray, reference: np.ndarray
     return result.points, alignment, result.counts
 
 
-def read_scan(path: Path, units: str) -> np.ndarray:
-    """A session scan in metres (``units`` "m", "mm" or "auto")."""
-    return read_point_cloud(path, units=units)
-
-
 def _refuse_output_over_input(output: Path, inputs: list[Path]) -> None:
     for item in inputs:
         if output.resolve() == item.resolve() or output.resolve() in item.resolve().parents:
@@ -306,7 +301,7 @@ def clean_greenhouse(source=None, output="data/greenhouse", *, manifest=None, la
             reference, models, titles = None, [], []
             for scan in tqdm([s for s in found.sessions if s.site == site], desc=f"cleaning {site}",
                              unit="session", disable=not progress):
-                points = read_scan(scan.path, units)
+                points = read_point_cloud(scan.path, units=units)
                 cleaned, alignment, counts = process_session(scan, points, reference, box, clean, icp)
                 if reference is None:
                     reference, reference_date = points, scan.date

@@ -57,7 +57,8 @@ ARCHIVE_NAME = "Pheno4D.zip"
 FOLDER_NAME = "Pheno4D"
 
 MANIFEST_COLUMNS = ("plant", "species", "date", "file", "normalised_file", "gt_file", "points",
-                    "extent_x", "extent_y", "extent_z", "scale", "gt_voxels", "labelled", "source")
+                    "plant_points", "extent_x", "extent_y", "extent_z", "scale", "gt_voxels", "labelled",
+                    "source")
 PAIR_COLUMNS = ("plant", "species", "previous_date", "current_date", "days_apart",
                 "previous_file", "current_file")
 
@@ -88,6 +89,10 @@ class Pheno4DConfig:
     gt_resolution: float = 0.002  # m, ground-truth voxel size
     year: int = 2020  # year of the MMDD dates in the file names
     centre: str = "bbox"  # "bbox" (paper) or "centroid" (the authors' code)
+    # Label of the soil/pot points of annotated scans: left out of the normalised plant and its
+    # ground truth (they are not plant surface to plan for, and would set the plant's size).
+    # None keeps them. Unannotated scans are used whole.
+    soil_label: int | None = 0
 
     def __post_init__(self):
         for name in ("largest_side", "gt_resolution"):
@@ -98,6 +103,9 @@ class Pheno4DConfig:
         if not isinstance(self.year, int) or isinstance(self.year, bool) \
                 or not 1 <= self.year <= 9999:
             raise ConfigError(f"year must be an integer year, got {self.year!r}")
+        if self.soil_label is not None and (not isinstance(self.soil_label, (int, np.integer))
+                                            or isinstance(self.soil_label, bool)):
+            raise ConfigError(f"soil_label must be an integer label or None, got {self.soil_label!r}")
         if self.centre not in ("bbox", "centroid"):
             raise ConfigError(f"centre must be 'bbox' or 'centroid', got {self.centre!r}")
 
@@ -376,8 +384,13 @@ def _prepare_scan(record: ScanRecord, archive, prefix: str, workdir, stage,
                   config: Pheno4DConfig, shown_source: str) -> dict:
     try:
         points, labels = _read_scan(record, archive, prefix, workdir)
-        extent = np.ptp(points, axis=0)
-        scene = normalise_plant(points, largest_side=config.largest_side, centre=config.centre)
+        plant = np.ones(len(points), dtype=bool)
+        if labels is not None and config.soil_label is not None:
+            plant = labels != config.soil_label
+            if not plant.any():
+                raise DatasetError(f"every point has the soil label {config.soil_label}: no plant left")
+        extent = np.ptp(points[plant], axis=0)
+        scene = normalise_plant(points[plant], largest_side=config.largest_side, centre=config.centre)
         gt = voxel_centres(scene.points, config.gt_resolution)
     except TpvpError as exc:
         message = str(exc)
@@ -391,7 +404,7 @@ def _prepare_scan(record: ScanRecord, archive, prefix: str, workdir, stage,
     normalised_file = folder / f"{stem}_normalised.ply"
     gt_file = folder / f"{stem}_gt{config.gt_tag}.ply"
     write_point_cloud(stage.path(file), points, labels)
-    write_point_cloud(stage.path(normalised_file), scene.points, labels)
+    write_point_cloud(stage.path(normalised_file), scene.points, labels[plant] if labels is not None else None)
     write_point_cloud(stage.path(gt_file), gt)
     return {
         "plant": record.plant,
@@ -401,6 +414,7 @@ def _prepare_scan(record: ScanRecord, archive, prefix: str, workdir, stage,
         "normalised_file": normalised_file.as_posix(),
         "gt_file": gt_file.as_posix(),
         "points": int(len(points)),
+        "plant_points": int(plant.sum()),
         "extent_x": float(extent[0]),
         "extent_y": float(extent[1]),
         "extent_z": float(extent[2]),
@@ -432,7 +446,9 @@ def _write_notice(stage, source, config: Pheno4DConfig,
     settings = (f"Scans in metres (scanner frame, labels kept); normalised copies scaled to a "
                 f"largest side of {config.largest_side} m and centred on the "
                 f"{'bounding-box centre' if config.centre == 'bbox' else 'centroid'}; "
-                f"ground-truth voxel grids at {config.gt_resolution} m.")
+                f"ground-truth voxel grids at {config.gt_resolution} m."
+                + (f" Points labelled {config.soil_label} (soil) of annotated scans are left out of the "
+                   "normalised copies and ground truth." if config.soil_label is not None else ""))
     if source is None:
         from tpvp.scene.samples import DATA
 

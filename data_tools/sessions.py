@@ -29,7 +29,6 @@ from data_tools.greenhouse import (
     _session_row,
     parse_date,
     process_session,
-    read_scan,
     site_boxes,
     write_session,
 )
@@ -79,7 +78,7 @@ def prepare_session(dataset, site: str, date, scan, *, landmarks=None, units: st
                           "prepare a scan from outside the dataset")
     boxes, config_path = site_boxes(site, dataset / "config")
     box = boxes["plant_box"] if boxes is not None else None
-    points = read_scan(scan, units)
+    points = read_point_cloud(scan, units=units)
     references = mine[mine["date"] == mine["reference_date"]]
     is_reference = len(references) == 0 or (len(existing) and existing.iloc[0]["date"] == existing.iloc[0]["reference_date"])
     if is_reference:

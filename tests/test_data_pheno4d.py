@@ -346,3 +346,24 @@ def test_interrupted_forced_run_leaves_the_dataset_as_it_was(raw, tmp_path, monk
     with pytest.raises(KeyboardInterrupt):
         _prepare(raw["zip"], out, force=True)
     assert tree_digest(out) == before
+
+
+def test_soil_points_are_left_out_of_the_normalised_plant_and_ground_truth(tmp_path):
+    files = {"Tomato01/T01_0305_a.txt": RAW["Pheno4D/Tomato01/T01_0305_a.txt"]}
+    folder = _write_folder(tmp_path / "raw", files)
+    raw_table = np.loadtxt(folder / "Tomato01" / "T01_0305_a.txt")
+    plant = raw_table[:, 3] != 0
+    kept = prepare_pheno4d(folder, tmp_path / "soil_removed", progress=False)
+    whole = prepare_pheno4d(folder, tmp_path / "soil_kept", Pheno4DConfig(soil_label=None), progress=False)
+    assert kept.points[0] == whole.points[0] == len(raw_table)
+    assert kept.plant_points[0] == plant.sum() < len(raw_table) and whole.plant_points[0] == len(raw_table)
+    np.testing.assert_allclose([kept.extent_x[0], kept.extent_y[0], kept.extent_z[0]],
+                               np.ptp(raw_table[plant, :3], axis=0) / 1000)
+    normalised, labels = read_point_cloud(tmp_path / "soil_removed" / kept.normalised_file[0], units="m",
+                                          return_labels=True)
+    assert len(normalised) == plant.sum() and (labels != 0).all()
+    expected = normalise_plant(raw_table[plant, :3] / 1000, largest_side=0.24).points
+    np.testing.assert_allclose(normalised, expected)
+    assert kept.gt_voxels[0] == len(voxel_centres(expected, 0.002))
+    # The metric copy keeps every point, soil included.
+    assert len(read_point_cloud(tmp_path / "soil_removed" / kept.file[0], units="m")) == len(raw_table)

@@ -139,6 +139,17 @@ def test_site_without_box_is_cleaned_without_crop(tmp_path):
     assert row["points_cropped"] == row["points_raw"] == 5000 and row["points"] > 4000
 
 
+def test_mesh_scan_is_sampled(tmp_path):
+    import trimesh
+
+    trimesh.creation.icosphere(subdivisions=3, radius=0.1).export(tmp_path / "plant.obj")
+    row = prepare_session(tmp_path / "ds", "pot1", "2025-10-02", tmp_path / "plant.obj")
+    model = read_point_cloud(tmp_path / "ds" / row["file"], units="m")
+    radius = np.linalg.norm(model - model.mean(axis=0), axis=1)
+    assert row["points_raw"] == 100_000 and len(model) == row["points"] > 1000
+    assert np.abs(radius - 0.1).max() < 0.01
+
+
 def bad_inputs(folder: Path, standin) -> list:
     good = read_point_cloud(standin.scans["20250922"], units="m")
     write_point_cloud(folder / "trunc.ply", good[:1000])
