@@ -89,8 +89,8 @@ class Pheno4DConfig:
     gt_resolution: float = 0.002  # m, ground-truth voxel size
     year: int = 2020  # year of the MMDD dates in the file names
     centre: str = "bbox"  # "bbox" (paper) or "centroid" (the authors' code)
-    # Label of the soil/pot points of annotated scans: left out of the normalised plant and its
-    # ground truth (they are not plant surface to plan for, and would set the plant's size).
+    # Label of the soil/pot points of annotated scans: left out of the prepared plant (they are
+    # not plant surface to plan for, and would set the plant's size). The archive keeps them.
     # None keeps them. Unannotated scans are used whole.
     soil_label: int | None = 0
 
@@ -324,8 +324,11 @@ def prepare_pheno4d(source=None, output="data/pheno4d", config: Pheno4DConfig = 
                     *, force: bool = False, progress: bool = True) -> pd.DataFrame:
     """Prepare Pheno4D scans (``source``: extracted folder or ZIP; None = the bundled samples).
 
-    Writes per scan ``<output>/<plant>/<plant>_<MMDD>.ply`` (metres, scanner frame, labels kept),
-    ``..._normalised.ply`` (largest side ``config.largest_side``, centred) and
+    Writes per scan ``<output>/<plant>/<plant>_<MMDD>.ply`` (the plant - soil points of annotated
+    scans left out - in metres, scanner frame, labels kept; consecutive days share the scanner
+    frame, so ``pairs.csv`` points at these), ``..._normalised.ply`` (largest side
+    ``config.largest_side``, centred; each scan on its own, so two days' copies do not share a
+    frame) and
     ``..._gt<res>mm.ply`` (ground-truth voxel centres of the normalised plant), then ``NOTICE.md``,
     ``pairs.csv`` and, last, ``manifest.csv`` (+ Parquet copies), all committed together at the end
     (:mod:`data_tools.staging`). Returns the manifest; its
@@ -403,8 +406,9 @@ def _prepare_scan(record: ScanRecord, archive, prefix: str, workdir, stage,
     file = folder / f"{stem}.ply"
     normalised_file = folder / f"{stem}_normalised.ply"
     gt_file = folder / f"{stem}_gt{config.gt_tag}.ply"
-    write_point_cloud(stage.path(file), points, labels)
-    write_point_cloud(stage.path(normalised_file), scene.points, labels[plant] if labels is not None else None)
+    plant_labels = labels[plant] if labels is not None else None
+    write_point_cloud(stage.path(file), points[plant], plant_labels)
+    write_point_cloud(stage.path(normalised_file), scene.points, plant_labels)
     write_point_cloud(stage.path(gt_file), gt)
     return {
         "plant": record.plant,
@@ -443,12 +447,12 @@ def session_pairs(manifest: pd.DataFrame) -> pd.DataFrame:
 
 def _write_notice(stage, source, config: Pheno4DConfig,
                   skipped: list[tuple[str, str]]) -> None:
-    settings = (f"Scans in metres (scanner frame, labels kept); normalised copies scaled to a "
+    settings = (f"Plants in metres (scanner frame, labels kept); normalised copies scaled to a "
                 f"largest side of {config.largest_side} m and centred on the "
                 f"{'bounding-box centre' if config.centre == 'bbox' else 'centroid'}; "
                 f"ground-truth voxel grids at {config.gt_resolution} m."
-                + (f" Points labelled {config.soil_label} (soil) of annotated scans are left out of the "
-                   "normalised copies and ground truth." if config.soil_label is not None else ""))
+                + (f" Points labelled {config.soil_label} (soil) of annotated scans are left out; the "
+                   "original archive keeps them." if config.soil_label is not None else ""))
     if source is None:
         from tpvp.scene.samples import DATA
 

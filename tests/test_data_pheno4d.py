@@ -225,11 +225,13 @@ def test_prepare_generated_archive_folder_and_zip_agree(raw, tmp_path):
     assert list(m.species) == ["maize"] * 3 + ["tomato"] * 2
     assert np.all(np.isclose(m[["extent_x", "extent_y", "extent_z"]].max(axis=1) * m.scale, 0.24))
 
-    # Labels survive (first label column), coordinates are in metres.
+    # Labels survive (first label column), coordinates are in metres, soil (label 0) is left out.
     points, labels = read_point_cloud(tmp_path / "b" / m.file[0], units="m", return_labels=True)
     raw_table = np.loadtxt(raw["folder"] / EXPECTED_SCANS[0][2])
-    np.testing.assert_allclose(points, raw_table[:, :3] / 1000)
-    np.testing.assert_array_equal(labels, raw_table[:, 3].astype(int))
+    plant = raw_table[:, 3] != 0
+    assert m.plant_points[0] == plant.sum() < m.points[0]
+    np.testing.assert_allclose(points, raw_table[plant, :3] / 1000)
+    np.testing.assert_array_equal(labels, raw_table[plant, 3].astype(int))
     _, no_labels = read_point_cloud(tmp_path / "b" / m.file[2], units="m", return_labels=True)
     assert no_labels is None
 
@@ -348,7 +350,7 @@ def test_interrupted_forced_run_leaves_the_dataset_as_it_was(raw, tmp_path, monk
     assert tree_digest(out) == before
 
 
-def test_soil_points_are_left_out_of_the_normalised_plant_and_ground_truth(tmp_path):
+def test_soil_points_are_left_out_of_the_prepared_plant(tmp_path):
     files = {"Tomato01/T01_0305_a.txt": RAW["Pheno4D/Tomato01/T01_0305_a.txt"]}
     folder = _write_folder(tmp_path / "raw", files)
     raw_table = np.loadtxt(folder / "Tomato01" / "T01_0305_a.txt")
@@ -365,5 +367,6 @@ def test_soil_points_are_left_out_of_the_normalised_plant_and_ground_truth(tmp_p
     expected = normalise_plant(raw_table[plant, :3] / 1000, largest_side=0.24).points
     np.testing.assert_allclose(normalised, expected)
     assert kept.gt_voxels[0] == len(voxel_centres(expected, 0.002))
-    # The metric copy keeps every point, soil included.
-    assert len(read_point_cloud(tmp_path / "soil_removed" / kept.file[0], units="m")) == len(raw_table)
+    metric = read_point_cloud(tmp_path / "soil_removed" / kept.file[0], units="m")
+    np.testing.assert_allclose(metric, raw_table[plant, :3] / 1000)
+    assert len(read_point_cloud(tmp_path / "soil_kept" / whole.file[0], units="m")) == len(raw_table)
