@@ -18,3 +18,12 @@ def tomato_scene(tomato_points):
     """Ground-truth grid (2 mm, with the supporting table) and the 32 hemisphere views."""
     grid = plant_grid(tomato_points.points, tomato_points.table_points, 0.002)
     return grid, load_view_space("hemisphere")
+
+
+@pytest.fixture(scope="session")
+def raw_standin(tmp_path_factory):
+    """Three generated room1 sessions written as raw captures with landmark files
+    (data_tools.standin); read-only for the tests that share it."""
+    from data_tools.standin import write_raw_standin
+
+    return write_raw_standin(tmp_path_factory.mktemp("raw_standin"), n_sessions=3)

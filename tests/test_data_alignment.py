@@ -17,7 +17,7 @@ from data_tools.alignment import (
     transform_points,
 )
 from data_tools.errors import ConfigError, InputFileError, PointCloudError
-from data_tools.standin import session_offset, write_raw_standin
+from data_tools.standin import session_offset
 from tpvp.io import read_point_cloud
 from tpvp.scene.boxes import room_config
 
@@ -111,8 +111,8 @@ def test_missing_landmarks_file(tmp_path):
 
 
 @pytest.fixture(scope="module")
-def standin(tmp_path_factory):
-    return write_raw_standin(tmp_path_factory.mktemp("standin"), n_sessions=3)
+def standin(raw_standin):
+    return raw_standin
 
 
 @pytest.mark.parametrize("date", ["20250918", "20250922"])

@@ -34,8 +34,8 @@ def quiet(*_):
 
 
 @pytest.fixture(scope="module")
-def raw(tmp_path_factory):
-    return write_raw_standin(tmp_path_factory.mktemp("raw"), n_sessions=3)
+def raw(raw_standin):
+    return raw_standin
 
 
 @pytest.fixture(scope="module")

@@ -14,7 +14,6 @@ from data_tools import cli
 from data_tools.errors import DatasetError, InputFileError, PointCloudError
 from data_tools.greenhouse import clean_greenhouse
 from data_tools.sessions import prepare_session
-from data_tools.standin import write_raw_standin
 from tpvp.errors import ConfigError
 from helpers import tree_digest
 from tpvp.io import read_point_cloud, write_point_cloud
@@ -22,17 +21,17 @@ from tpvp.scene.boxes import room_config
 
 
 @pytest.fixture(scope="module")
-def standin(tmp_path_factory):
-    return write_raw_standin(tmp_path_factory.mktemp("raw"), n_sessions=3)
+def standin(raw_standin):
+    return raw_standin
 
 
 @pytest.fixture(scope="module")
 def base_dataset(standin, tmp_path_factory):
     """A dataset cleaned from the first two sessions; the third is the user's new scan."""
     out = tmp_path_factory.mktemp("ds") / "dataset"
-    manifest = standin.folder / "two.csv"
-    manifest.write_text("site,date,file,landmarks\nroom1,2025-09-15,raw/room1_20250915_raw.ply,\n"
-                        "room1,2025-09-18,raw/room1_20250918_raw.ply,landmarks/room1_20250918.csv\n")
+    manifest = out.parent / "two.csv"  # absolute paths: the shared stand-in folder stays untouched
+    manifest.write_text(f"site,date,file,landmarks\nroom1,2025-09-15,{standin.scans['20250915']},\n"
+                        f"room1,2025-09-18,{standin.scans['20250918']},{standin.landmarks['20250918']}\n")
     clean_greenhouse(None, out, manifest=manifest, progress=False, log=lambda *_: None)
     return out
 
