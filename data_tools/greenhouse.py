@@ -217,8 +217,9 @@ def site_boxes(site: str, config_dir=None) -> tuple[dict[str, OrientedBox], Path
     return None, None
 
 
-def _session_row(scan: SessionScan, reference_date: dt.date, counts: dict, points: np.ndarray,
-                 box: OrientedBox | None, alignment: Alignment, units: str) -> dict:
+def session_row(scan: SessionScan, reference_date: dt.date, counts: dict, points: np.ndarray,
+                box: OrientedBox | None, alignment: Alignment, units: str) -> dict:
+    """The manifest row (MANIFEST_COLUMNS) of a cleaned session."""
     local = box.to_local(points) if box is not None else points
     extent = local.max(axis=0) - local.min(axis=0)
     return {
@@ -308,7 +309,7 @@ def clean_greenhouse(source=None, output="data/greenhouse", *, manifest=None, la
                     write_point_cloud(stage.path(f"reference/{site}_static.pcd"),
                                       voxel_downsample(points, icp.voxel_size / 2), dtype="float32")
                 write_session(stage, scan, cleaned, alignment)
-                rows.append(_session_row(scan, reference_date, counts, cleaned, box, alignment, units))
+                rows.append(session_row(scan, reference_date, counts, cleaned, box, alignment, units))
                 models.append(cleaned)
                 titles.append(f"{scan.date}  {len(cleaned):,} points\n{alignment.method}, fitness "
                               f"{alignment.fitness:.2f}, RMSE {1000 * alignment.inlier_rmse:.1f} mm")

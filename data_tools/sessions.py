@@ -26,7 +26,7 @@ from data_tools.greenhouse import (
     MANIFEST_COLUMNS,
     PROCESSED_FOLDER,
     SessionScan,
-    _session_row,
+    session_row,
     parse_date,
     process_session,
     site_boxes,
@@ -48,11 +48,12 @@ def _reference_cloud(dataset: Path, site: str, reference_row) -> np.ndarray:
 
 def _check_units(scan_path: Path, points: np.ndarray, reference: np.ndarray) -> None:
     ratio = np.ptp(points, axis=0).max() / max(np.ptp(reference, axis=0).max(), 1e-9)
-    if ratio > UNITS_RATIO_LIMIT or ratio < 1.0 / UNITS_RATIO_LIMIT:
-        hint = "millimetres? pass --units mm" if ratio > 1 else "a different unit? check --units"
-        raise PointCloudError(f"{scan_path}: spans {ratio:.0f}x the site's reference day ({hint})"
-                              if ratio > 1 else f"{scan_path}: spans 1/{1 / ratio:.0f} of the site's "
-                              f"reference day ({hint})")
+    if ratio > UNITS_RATIO_LIMIT:
+        raise PointCloudError(f"{scan_path}: spans {ratio:.0f} times the site's reference day "
+                              "(millimetres? pass --units mm)")
+    if ratio < 1.0 / UNITS_RATIO_LIMIT:
+        raise PointCloudError(f"{scan_path}: spans 1/{1 / ratio:.0f} of the site's reference day "
+                              "(a different unit? check --units)")
 
 
 def prepare_session(dataset, site: str, date, scan, *, landmarks=None, units: str = "m",
@@ -81,6 +82,10 @@ def prepare_session(dataset, site: str, date, scan, *, landmarks=None, units: st
     points = read_point_cloud(scan, units=units)
     references = mine[mine["date"] == mine["reference_date"]]
     is_reference = len(references) == 0 or (len(existing) and existing.iloc[0]["date"] == existing.iloc[0]["reference_date"])
+    if is_reference and len(mine) > len(existing):
+        raise DatasetError(f"session {site} {date} is the reference day of {len(mine) - 1} other session(s) in "
+                           f"{manifest_path}: replacing it would move their frame; rebuild the site with "
+                           "`python -m data_tools greenhouse clean` instead")
     if is_reference:
         reference, reference_date = None, date
     else:
@@ -89,9 +94,9 @@ def prepare_session(dataset, site: str, date, scan, *, landmarks=None, units: st
         reference_date = parse_date(reference_row["reference_date"])
         _check_units(scan, points, reference)
     cleaned, alignment, counts = process_session(session, points, reference, box, clean, icp)
-    row = _session_row(session, reference_date, counts, cleaned, box, alignment, units)
+    row = session_row(session, reference_date, counts, cleaned, box, alignment, units)
     others = table[~((table["site"] == site) & (table["date"] == row["date"]))]
-    updated = pd.concat([others, pd.DataFrame([row]).astype({c: object for c in row})], ignore_index=True)
+    updated = pd.concat([others, pd.DataFrame([row])], ignore_index=True) if len(others) else pd.DataFrame([row])
     updated = updated.sort_values(["site", "date"], kind="stable").reset_index(drop=True)
     with staged_update(dataset) as stage:
         if config_path is not None and config_path.parent != dataset / "config":

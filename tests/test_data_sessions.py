@@ -77,6 +77,9 @@ def test_existing_session_needs_force(standin, dataset, capsys):
     assert cli.main(args + ["--force"]) == 0
     table = pd.read_csv(dataset / "manifest.csv")
     assert list(table["date"]) == ["2025-09-15", "2025-09-18"]
+    # The reference day of other sessions cannot be swapped: their alignment would be wrong.
+    with pytest.raises(DatasetError, match="reference day of 1 other session"):
+        prepare_session(dataset, "room1", "2025-09-15", standin.scans["20250915"], force=True)
     # The dataset's own model cannot be its own new raw scan (it would be overwritten).
     own = dataset / table["file"].iloc[1]
     with pytest.raises(ConfigError, match="raw scans are never modified"):
