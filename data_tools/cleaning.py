@@ -75,14 +75,13 @@ def _fit_plane(points: np.ndarray) -> tuple[np.ndarray, float]:
     return normal, -float(normal @ centre)
 
 
-def _patch_fill(points: np.ndarray, normal: np.ndarray, cell: float) -> tuple[float, float, np.ndarray]:
-    """(filled area m^2, share of the bounding rectangle filled, occupied 2D cell keys) of the inliers,
-    measured in the plane along the inliers' principal axes."""
+def _patch_fill(points: np.ndarray, cell: float) -> tuple[float, float]:
+    """(filled area m^2, share of the bounding rectangle filled) of plane inliers, measured on
+    ``cell``-sized squares in the plane along the inliers' principal axes."""
     axes = np.linalg.svd(points - points.mean(axis=0), full_matrices=False)[2][:2]
-    uv = np.floor(points @ axes.T / cell).astype(np.int64)
-    cells = np.unique(uv, axis=0)
+    cells = np.unique(np.floor(points @ axes.T / cell).astype(np.int64), axis=0)
     span = cells.max(axis=0) - cells.min(axis=0) + 1
-    return len(cells) * cell ** 2, len(cells) / float(np.prod(span)), axes
+    return len(cells) * cell ** 2, len(cells) / float(np.prod(span))
 
 
 def find_support_planes(points: np.ndarray, box, config: CleanConfig = CleanConfig()) -> np.ndarray:
@@ -117,7 +116,7 @@ def find_support_planes(points: np.ndarray, box, config: CleanConfig = CleanConf
         on_plane = pool[np.abs(points[pool] @ normal + offset) <= config.plane_distance]
         if abs(normal @ up) < min_cos or len(on_plane) < 3:
             break
-        area, fill, _ = _patch_fill(points[on_plane], normal, config.fill_cell)
+        area, fill = _patch_fill(points[on_plane], config.fill_cell)
         if area < config.min_plane_area or fill < config.min_plane_fill:
             break  # the best remaining plane is foliage, not a support
         removed[on_plane] = True

@@ -77,12 +77,7 @@ def _read_sidecar(destination: Path) -> str | None:
 def file_sha256(path, chunk_size: int = 1 << 20) -> str:
     """SHA-256 hex digest of a file, read in chunks (constant memory)."""
     digest = hashlib.sha256()
-    try:
-        with open(path, "rb") as fh:
-            while chunk := fh.read(chunk_size):
-                digest.update(chunk)
-    except OSError as exc:
-        raise InputFileError(f"{path}: cannot read: {exc.strerror or exc}") from None
+    _hash_prefix(Path(path), None, digest, chunk_size)
     return digest.hexdigest()
 
 
@@ -258,12 +253,12 @@ def _discard(part: Path) -> int:
     return 0
 
 
-def _hash_prefix(part: Path, size: int, digest, chunk_size: int) -> None:
-    """Feed the first ``size`` bytes already on disk into ``digest`` (the resumed part)."""
+def _hash_prefix(part: Path, size: int | None, digest, chunk_size: int) -> None:
+    """Feed the first ``size`` bytes of a file (all of it for None) into ``digest``."""
     try:
         with open(part, "rb") as fh:
-            left = size
-            while left > 0 and (chunk := fh.read(min(chunk_size, left))):
+            left = size if size is not None else float("inf")
+            while left > 0 and (chunk := fh.read(int(min(chunk_size, left)))):
                 digest.update(chunk)
                 left -= len(chunk)
     except OSError as exc:

@@ -36,7 +36,7 @@ import pandas as pd
 from data_tools.alignment import Alignment, IcpConfig, align_to_reference, transform_points
 from data_tools.cleaning import CleanConfig, clean_scan, voxel_downsample
 from data_tools.errors import ConfigError, DatasetError, InputFileError, PointCloudError
-from data_tools.manifest import read_table, stage_manifest
+from data_tools.manifest import read_table, stage_table
 from data_tools.staging import staged_update
 from tpvp.io import READ_EXTENSIONS, read_point_cloud, write_point_cloud
 from tpvp.scene.boxes import DATA_DIR as BUNDLED_CONFIG_DIR
@@ -240,6 +240,17 @@ def _transform_text(transform: np.ndarray) -> str:
     return "\n".join(" ".join(f"{v:.12g}" for v in row) for row in transform) + "\n"
 
 
+def reference_file(site: str) -> str:
+    """Dataset path of a site's reference-day scan (full, downsampled): later sessions align to it."""
+    return f"reference/{site}_static.pcd"
+
+
+def write_reference(stage, site: str, points: np.ndarray, icp: IcpConfig) -> None:
+    """Stage the reference day's whole scan, downsampled finer than ICP uses it."""
+    write_point_cloud(stage.path(reference_file(site)), voxel_downsample(points, icp.voxel_size / 2),
+                      dtype="float32")
+
+
 def write_session(stage, scan: SessionScan, cleaned: np.ndarray, alignment: Alignment) -> None:
     """Stage a session's model and transform."""
     write_point_cloud(stage.path(f"{PROCESSED_FOLDER}/{scan.name}.pcd"), cleaned, dtype="float32")
@@ -306,8 +317,7 @@ def clean_greenhouse(source=None, output="data/greenhouse", *, manifest=None, la
                 cleaned, alignment, counts = process_session(scan, points, reference, box, clean, icp)
                 if reference is None:
                     reference, reference_date = points, scan.date
-                    write_point_cloud(stage.path(f"reference/{site}_static.pcd"),
-                                      voxel_downsample(points, icp.voxel_size / 2), dtype="float32")
+                    write_reference(stage, site, points, icp)
                 write_session(stage, scan, cleaned, alignment)
                 rows.append(session_row(scan, reference_date, counts, cleaned, box, alignment, units))
                 models.append(cleaned)
@@ -319,5 +329,5 @@ def clean_greenhouse(source=None, output="data/greenhouse", *, manifest=None, la
             plot_row_sessions(stage.path(f"report/{site}_sessions.png"), models, titles, box,
                               f"{site}: cleaned sessions in the plant-box frame (side and top views)")
         table = pd.DataFrame(rows, columns=list(MANIFEST_COLUMNS))
-        stage_manifest(stage, table)
+        stage_table(stage, table, "manifest.csv")
     return table

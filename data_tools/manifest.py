@@ -47,8 +47,8 @@ def read_table(path, required: tuple[str, ...] = ()) -> pd.DataFrame:
     return df
 
 
-def stage_manifest(stage, table: pd.DataFrame) -> None:
-    """Write ``table`` as the manifest of a staged update (:mod:`data_tools.staging`), registered
-    after every other file so that it is moved into place last."""
-    stage.path("manifest.parquet")
-    write_table(table, stage.path("manifest.csv"))
+def stage_table(stage, table: pd.DataFrame, name: str) -> None:
+    """Write ``table`` as ``name`` (CSV) plus its Parquet copy into a staged update
+    (:mod:`data_tools.staging`), registered now: stage the manifest last so it moves in last."""
+    stage.path(Path(name).with_suffix(".parquet"))
+    write_table(table, stage.path(name))

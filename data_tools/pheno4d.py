@@ -31,7 +31,7 @@ import pandas as pd
 
 from data_tools.download import download_file, verify_zip
 from data_tools.errors import ConfigError, DatasetError, InputFileError, TpvpError
-from data_tools.manifest import stage_manifest, write_table
+from data_tools.manifest import stage_table
 from data_tools.staging import staged_update
 from tpvp.io import read_point_cloud, write_point_cloud
 from tpvp.scene.normalise import normalise_plant
@@ -375,9 +375,8 @@ def prepare_pheno4d(source=None, output="data/pheno4d", config: Pheno4DConfig = 
         manifest = pd.DataFrame(rows, columns=list(MANIFEST_COLUMNS))
         pairs = session_pairs(manifest)
         _write_notice(stage, source, config, skipped)
-        stage.path("pairs.parquet")
-        write_table(pairs, stage.path("pairs.csv"))
-        stage_manifest(stage, manifest)
+        stage_table(stage, pairs, "pairs.csv")
+        stage_table(stage, manifest, "manifest.csv")
     manifest.attrs["pairs"] = pairs
     manifest.attrs["skipped"] = list(skipped)
     return manifest

@@ -20,7 +20,7 @@ import numpy as np
 import pandas as pd
 
 from data_tools.alignment import IcpConfig
-from data_tools.cleaning import CleanConfig, voxel_downsample
+from data_tools.cleaning import CleanConfig
 from data_tools.errors import ConfigError, DatasetError, InputFileError, PointCloudError
 from data_tools.greenhouse import (
     MANIFEST_COLUMNS,
@@ -29,19 +29,21 @@ from data_tools.greenhouse import (
     session_row,
     parse_date,
     process_session,
+    reference_file,
     site_boxes,
+    write_reference,
     write_session,
 )
-from data_tools.manifest import read_table, stage_manifest
+from data_tools.manifest import read_table, stage_table
 from data_tools.staging import staged_update
-from tpvp.io import read_point_cloud, write_point_cloud
+from tpvp.io import read_point_cloud
 
 #: A new scan whose extent differs from the reference day's by more than this factor has wrong units.
 UNITS_RATIO_LIMIT = 20.0
 
 
 def _reference_cloud(dataset: Path, site: str, reference_row) -> np.ndarray:
-    static = dataset / "reference" / f"{site}_static.pcd"
+    static = dataset / reference_file(site)
     path = static if static.is_file() else dataset / reference_row["file"]
     return read_point_cloud(path, units="m")
 
@@ -102,8 +104,7 @@ def prepare_session(dataset, site: str, date, scan, *, landmarks=None, units: st
         if config_path is not None and config_path.parent != dataset / "config":
             shutil.copyfile(config_path, stage.path(f"config/{site}_bbx_config.yaml"))
         if is_reference:
-            write_point_cloud(stage.path(f"reference/{site}_static.pcd"),
-                              voxel_downsample(points, icp.voxel_size / 2), dtype="float32")
+            write_reference(stage, site, points, icp)
         write_session(stage, session, cleaned, alignment)
-        stage_manifest(stage, updated)
+        stage_table(stage, updated, "manifest.csv")
     return row
