@@ -14,6 +14,7 @@ OUT ?= outputs
 $(STAMP): environment.txt pyproject.toml
 	@$(MAKE) --no-print-directory system-deps
 	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
+	@echo "installing the Python packages into $(VENV) (about 1.5 minutes, 2.9 GB) ..."
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	$(BIN)/python -m pip install --quiet -r environment.txt
 	$(BIN)/python -m pip install --quiet --no-deps -e .

@@ -1,6 +1,6 @@
 """Greenhouse oracle on a generated row: our time against OctoMap's castRay on the same rays.
 
-The oracle (SPEC.md) tries view-box grid points nearest first for every ground-truth voxel. Running
+The oracle (docs/greenhouse.md#oracle) tries view-box grid points nearest first for every ground-truth voxel. Running
 it with OctoMap would take hours (the paper), so the anchor is OctoMap's measured cost per castRay on
 the same octree, for a random sample of the same kind of rays, times the number of rays our oracle
 cast. Usage: python benchmarks/oracle_bench.py [--room room1] [--session 0] [--sample-rays 20000]
@@ -18,7 +18,7 @@ import pandas as pd
 
 from tpvp.scene import voxels
 from tpvp.scene.boxes import room_config
-from tpvp.scene.greenhouse import generate_row
+from tpvp.synthetic.greenhouse import generate_row
 from tpvp.sensor.grid import build_grid
 from tpvp.visibility.oracle import greenhouse_oracle
 

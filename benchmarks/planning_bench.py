@@ -38,7 +38,7 @@ except ImportError:  # not installed: run from a checkout
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from tpvp.path import TspConfig, band_path, local_path_lengths, shortest_open_path
-from tpvp.path.tsp import _nearest_neighbour, path_length
+from tpvp.path import nearest_neighbour_path, path_length
 from tpvp.setcover import SetCoverConfig, solve_set_cover
 
 
@@ -143,7 +143,7 @@ def bench_tsp(rng) -> list[dict]:
     for n in (200, 400):
         pts = rng.uniform([0, -1.3, 0.3], [10, -0.8, 2.0], size=(n, 3))
         d = np.linalg.norm(pts[:, None] - pts[None], axis=2)
-        nn = path_length(d, _nearest_neighbour(d, 0, None))
+        nn = path_length(d, nearest_neighbour_path(d, 0))
         res = shortest_open_path(d, 0, config=TspConfig(method="heuristic"))
         out.append(row("open TSP row band [heuristic]", f"{n} views", res.solve_seconds, res.optimal, np.nan,
                        f"length={res.length:.2f} m (nearest neighbour {nn:.2f} m)"))

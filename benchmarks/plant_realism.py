@@ -19,7 +19,7 @@ import numpy as np
 import pandas as pd
 
 from tpvp.scene.normalise import normalise_plant
-from tpvp.scene.plants import generate_plant, generate_session_pair
+from tpvp.synthetic.plants import generate_plant, generate_session_pair
 from tpvp.scene.samples import load_sample
 from tpvp.sensor.grid import plant_grid
 from tpvp.viewspace import load_view_space

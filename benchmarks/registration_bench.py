@@ -20,7 +20,7 @@ import numpy as np
 from tpvp.registration import EDConfig, register_embedded_deformation
 from tpvp.scene import voxels
 from tpvp.scene.normalise import normalise_plant
-from tpvp.scene.plants import generate_session_pair
+from tpvp.synthetic.plants import generate_session_pair
 from tpvp.scene.samples import load_sample
 
 

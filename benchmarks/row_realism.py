@@ -16,7 +16,7 @@ import time
 import numpy as np
 
 from tpvp.scene.boxes import room_config
-from tpvp.scene.greenhouse import DATES, generate_row, row_correspondences, row_summary
+from tpvp.synthetic.greenhouse import DATES, generate_row, row_correspondences, row_summary
 
 
 def main(argv=None) -> None:

@@ -60,7 +60,7 @@ try:
 except ImportError:  # the anchor is optional; our figures are still printed
     pyoctomap = None
 
-GT_RES = 0.002  # ground-truth voxels of single plants (SPEC.md)
+GT_RES = 0.002  # ground-truth voxels of single plants (docs/single_plant.md#ground-truth)
 COVER_RES = 0.004  # set-cover resolution of single plants
 MAX_RANGE = 1.0
 ORIGIN = np.zeros(3)
@@ -481,14 +481,14 @@ def main(argv=None) -> int:
     # ---------------------------------------------------------------- optional greenhouse row
     greenhouse_line = None
     try:
-        from tpvp.scene import greenhouse
+        from tpvp.synthetic import greenhouse
         has_row = hasattr(greenhouse, "generate_row")
     except ImportError:
         has_row = False
     if args.no_greenhouse:
         greenhouse_line = "greenhouse section skipped (--no-greenhouse)"
     elif not has_row:
-        greenhouse_line = "greenhouse section skipped: tpvp.scene.greenhouse.generate_row is not available yet"
+        greenhouse_line = "greenhouse section skipped: tpvp.synthetic.greenhouse.generate_row is not available yet"
     else:
         from tpvp.scene.boxes import room_config
 

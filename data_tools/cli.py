@@ -129,7 +129,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = green.add_parser("download", help="download the dataset from Kaggle (needs an API token)")
     p.add_argument("--output", default="data/greenhouse_raw", help="download folder (default: %(default)s)")
     p.add_argument("--dataset", default=KAGGLE_DATASET, help="Kaggle dataset (default: %(default)s)")
-    p.add_argument("--no-unzip", action="store_true")
+    p.add_argument("--no-unzip", action="store_true", help="keep the downloaded zip as it is (default: unzip it)")
     p.add_argument("--force", action="store_true", help="download again even if complete")
     p.set_defaults(func=_greenhouse_download)
     p = green.add_parser("clean", help="crop, remove supports and outliers, downsample, align every session to day one")
@@ -142,9 +142,10 @@ def build_parser() -> argparse.ArgumentParser:
     _cleaning_options(p)
     p.set_defaults(func=_greenhouse_clean)
     p = green.add_parser("standin", help="write generated rows in the dataset's layouts (offline stand-in)")
-    p.add_argument("--output", default="data/greenhouse_standin")
-    p.add_argument("--room", default="room1", choices=["room1", "room4"])
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--output", default="data/greenhouse_standin", help="output folder (default: %(default)s)")
+    p.add_argument("--room", default="room1", choices=["room1", "room4"],
+                   help="greenhouse room whose boxes the generated row fills (default: %(default)s)")
+    p.add_argument("--seed", type=int, default=0, help="random seed of the generated row (default: %(default)s)")
     p.add_argument("--sessions", type=int, default=5, help="number of sessions 1..5 (default: %(default)s)")
     p.add_argument("--processed", action="store_true",
                    help="write processed models (Processed_3D_Model) instead of raw captures with landmarks")

@@ -38,7 +38,7 @@ from data_tools.cleaning import CleanConfig, clean_scan, voxel_downsample
 from data_tools.errors import ConfigError, DatasetError, InputFileError, PointCloudError
 from data_tools.manifest import read_table, stage_table
 from data_tools.staging import staged_update
-from tpvp.io import READ_EXTENSIONS, read_point_cloud, write_point_cloud
+from tpvp.io import READ_EXTENSIONS, cloud_extension, read_point_cloud, write_point_cloud
 from tpvp.scene.boxes import DATA_DIR as BUNDLED_CONFIG_DIR
 from tpvp.scene.boxes import OrientedBox, read_bbx_config
 from tpvp.viz import plot_row_sessions
@@ -150,7 +150,7 @@ def find_sessions(source, *, manifest=None, landmarks=None, exclude=None) -> Dis
             continue  # hidden files and our own staging folders
         if any(folder in path.resolve().parents for folder in ignored):
             continue
-        if path.suffix.lower() not in READ_EXTENSIONS:
+        if cloud_extension(path)[0] not in READ_EXTENSIONS:
             skipped.append((rel, f"not a point cloud or mesh ({path.suffix or 'no extension'})"))
             continue
         if "landmark" in path.name.lower():

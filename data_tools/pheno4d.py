@@ -7,7 +7,7 @@ archive: plant folders ``Maize01..Maize07`` and ``Tomato01..Tomato07`` (possibly
 millimetres, ``MMDD`` the scan date, ``_a`` = annotated (labels 0 soil, 1 stem, 2+ leaf instances).
 
 :func:`prepare_pheno4d` turns the archive (or the three scans bundled with tpvp) into one folder per
-plant with, per scan day, the scan in metres, the normalised plant (SPEC.md "Single plant") and the
+plant with, per scan day, the scan in metres, the normalised plant (docs/single_plant.md#normalisation) and the
 ground-truth voxel grid, plus ``manifest.csv`` (one row per scan) and ``pairs.csv`` (previous /
 current session pairs). The raw data is only read, never modified.
 """
@@ -83,7 +83,7 @@ _BUNDLED_YEAR = 2020
 
 @dataclass(frozen=True)
 class Pheno4DConfig:
-    """How scans are prepared (SPEC.md "Single plant")."""
+    """How scans are prepared (docs/single_plant.md#normalisation)."""
 
     largest_side: float = 0.24  # m, largest bounding-box side after normalisation
     gt_resolution: float = 0.002  # m, ground-truth voxel size

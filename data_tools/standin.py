@@ -1,6 +1,6 @@
 """Offline stand-ins for the greenhouse dataset, in the layouts the cleaning tools accept.
 
-* :func:`write_processed_standin` - generated rows (tpvp.scene.greenhouse) as the dataset's
+* :func:`write_processed_standin` - generated rows (tpvp.synthetic.greenhouse) as the dataset's
   processed models ``Processed_3D_Model/room<k>_<YYYYMMDD>.pcd`` (cropped, aligned, metres).
 * :func:`write_raw_standin` - the same rows as raw per-session captures ``raw/room<k>_<YYYYMMDD>_raw.ply``:
   plants plus the static greenhouse (floor, heating-pipe rails in both aisles, posts at the row
@@ -22,7 +22,7 @@ import numpy as np
 from data_tools.alignment import LANDMARK_COLUMNS, transform_points
 from tpvp.io import atomic_write_text, write_point_cloud
 from tpvp.scene.boxes import OrientedBox, room_config
-from tpvp.scene.greenhouse import DATES, generate_row_sessions, save_row_sessions
+from tpvp.synthetic.greenhouse import DATES, generate_row_sessions, save_row_sessions
 
 
 @dataclass(frozen=True)

@@ -1,6 +1,6 @@
 """Greenhouse dataset tools: session discovery, cleaning, alignment to day one, Kaggle download.
 
-The real dataset cannot be downloaded here; the generated rows of tpvp.scene.greenhouse, written in
+The real dataset cannot be downloaded here; the generated rows of tpvp.synthetic.greenhouse, written in
 the dataset's layouts by data_tools.standin (processed models, and raw captures with static
 greenhouse structure, outliers, known rigid offsets and landmark files), go through the same path.
 """
@@ -26,7 +26,7 @@ from tpvp.errors import ConfigError
 from helpers import tree_digest
 from tpvp.io import read_point_cloud, write_point_cloud
 from tpvp.scene.boxes import room_config
-from tpvp.scene.greenhouse import generate_row
+from tpvp.synthetic.greenhouse import generate_row
 
 
 def quiet(*_):

@@ -44,7 +44,7 @@ def _plant_text(seed: int, n: int, label_columns: int) -> bytes:
 
 # name inside the archive -> (content, points)
 RAW = {
-    # Maize copies can carry a second label column (SPEC "Data formats seen in the wild").
+    # Maize copies can carry a second label column (docs/data.md#pheno4d-text-files).
     "Pheno4D/Maize01/M01_0313_a.txt": (_plant_text(1, 300, 2), 300),
     "Pheno4D/Maize01/M01_0314_a.txt": (_plant_text(2, 320, 1), 320),
     "Pheno4D/Maize01/M01_0314.txt": (_plant_text(3, 350, 0), 350),  # unannotated twin: skipped

@@ -6,7 +6,7 @@ from scipy.spatial import cKDTree
 
 from tpvp.errors import ConfigError, InputFileError
 from tpvp.scene.boxes import OrientedBox, room_config
-from tpvp.scene.greenhouse import (
+from tpvp.synthetic.greenhouse import (
     DATES,
     FRUIT,
     LEAF,

@@ -69,10 +69,12 @@ def test_hand_cases_and_strict_thresholds():
 
 
 def test_switch_off_gives_the_ablation():
+    # Table III's "w/o inflation": planning on the aligned previous session P~ alone
     rng = np.random.default_rng(3)
-    P, Q = rng.uniform(-0.02, 0.02, (50, 3)), rng.uniform(-0.02, 0.02, (50, 3))
-    r = inflate(P, Q, np.zeros(3), 0.02, InflationConfig(add_current=False))
-    assert len(r.inflation) == 0 and len(r.planning) == 100
+    P, Q = rng.uniform(-0.02, 0.02, (50, 3)), rng.uniform(-0.02, 0.02, (40, 3))
+    r = inflate(P, Q, np.zeros(3), 0.02, InflationConfig(enabled=False))
+    assert len(r.inflation) == 0
+    np.testing.assert_array_equal(r.planning, P)
 
 
 def test_voxel_inflation_hand_case():

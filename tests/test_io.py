@@ -708,3 +708,132 @@ def test_atomic_write_bytes(tmp_path):
     with pytest.raises(InputFileError) as info:
         atomic_write_bytes(blocker / "child.txt", b"")
     assert str(blocker) in str(info.value)
+
+
+# ---------------------------------------------------------------------------------------------
+# gzip-compressed files and the units report
+
+
+def _gzip_copy(path: Path, name: str | None = None) -> Path:
+    import gzip
+
+    target = path.with_name(name or path.name + ".gz")
+    target.write_bytes(gzip.compress(path.read_bytes(), mtime=0))
+    return target
+
+
+@pytest.mark.parametrize("ext,binary", [(".ply", True), (".ply", False), (".pcd", True), (".pcd", False),
+                                        (".xyz", None), (".txt", None), (".pts", None), (".csv", None)])
+def test_gzip_equals_plain(tmp_path, cloud, ext, binary):
+    pts, labels = cloud
+    plain = write_point_cloud(tmp_path / f"c{ext}", pts, labels, binary=bool(binary))
+    packed = _gzip_copy(plain)
+    a, la = read_point_cloud(plain, return_labels=True)
+    b, lb = read_point_cloud(packed, return_labels=True)
+    np.testing.assert_array_equal(a, b)
+    np.testing.assert_array_equal(la, lb)
+    # Upper-case names work too.
+    np.testing.assert_array_equal(read_point_cloud(_gzip_copy(plain, f"C{ext.upper()}.GZ")), a)
+
+
+@pytest.mark.parametrize("fmt", ["binary_big_endian", "binary_little_endian", "ascii"])
+def test_gzip_hand_made_ply(tmp_path, cloud, fmt):
+    pts, labels = cloud
+    plain = tmp_path / "h.ply"
+    make_ply(plain, fmt, pts, labels=labels, faces_before=True)
+    a, la = read_point_cloud(plain, return_labels=True)
+    b, lb = read_point_cloud(_gzip_copy(plain), return_labels=True)
+    np.testing.assert_array_equal(a, b)
+    np.testing.assert_array_equal(la, lb)
+
+
+def test_gzip_compressed_pcd(tmp_path):
+    o3d = pytest.importorskip("open3d")
+    pts = np.random.default_rng(3).uniform(-0.1, 0.1, (300, 3))
+    pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(pts))
+    plain = tmp_path / "lzf.pcd"
+    o3d.io.write_point_cloud(str(plain), pcd, compressed=True)
+    assert b"binary_compressed" in plain.read_bytes()[:400]
+    np.testing.assert_array_equal(read_point_cloud(_gzip_copy(plain)), read_point_cloud(plain))
+
+
+@pytest.mark.parametrize("ext", [".obj", ".stl", ".off", ".glb"])
+def test_gzip_mesh(tmp_path, ext):
+    trimesh = pytest.importorskip("trimesh")
+    plain = tmp_path / f"box{ext}"
+    trimesh.creation.box(extents=[0.2, 0.3, 0.5]).export(plain)
+    a = read_point_cloud(plain, mesh_samples=500)
+    np.testing.assert_array_equal(read_point_cloud(_gzip_copy(plain), mesh_samples=500), a)
+
+
+def test_gzip_bundled_sample():
+    from tpvp.scene.samples import DATA, load_sample
+
+    packed = DATA / "tomato_0306.xyz.gz"
+    np.testing.assert_array_equal(read_point_cloud(packed, units="mm"), load_sample("tomato_0306"))
+
+
+def test_gzip_text_table(tmp_path):
+    plain = tmp_path / "t.txt"
+    plain.write_text("3\n1 2\n3 4\n5 6\n")
+    np.testing.assert_array_equal(read_text_table(_gzip_copy(plain)), read_text_table(plain))
+
+
+def test_gzip_errors(tmp_path, cloud):
+    import gzip
+
+    pts, _ = cloud
+    plain = write_point_cloud(tmp_path / "c.ply", pts)
+    data = gzip.compress(plain.read_bytes())
+    for cut in (5, 30, len(data) // 2):  # inside the trailer, the deflate stream, the middle
+        bad = tmp_path / f"cut{cut}.ply.gz"
+        bad.write_bytes(data[:-cut])
+        raises_naming(InputFileError, bad, read_point_cloud, bad, match="truncated gzip file")
+    fake = tmp_path / "fake.ply.gz"
+    fake.write_bytes(plain.read_bytes())  # not compressed at all
+    raises_naming(InputFileError, fake, read_point_cloud, fake, match="not a valid gzip file")
+    empty = tmp_path / "empty.xyz.gz"
+    empty.write_bytes(gzip.compress(b""))
+    raises_naming(InputFileError, empty, read_point_cloud, empty, match="empty file")
+    bare = tmp_path / "bare.gz"
+    bare.write_bytes(data)
+    raises_naming(InputFileError, bare, read_point_cloud, bare, match="unknown point-cloud extension")
+    # An error inside the decompressed file still names the .gz file.
+    short = tmp_path / "short.ply.gz"
+    short.write_bytes(gzip.compress(plain.read_bytes()[:-100]))
+    raises_naming(InputFileError, short, read_point_cloud, short, match="truncated")
+
+
+def test_cloud_extension():
+    from tpvp.io import GZIP_READ_EXTENSIONS, READ_EXTENSIONS, cloud_extension
+
+    assert cloud_extension("a/scan.PLY.gz") == (".ply", True)
+    assert cloud_extension("scan.xyz") == (".xyz", False)
+    assert cloud_extension("scan.gz") == ("", True)
+    assert ".pcd.gz" in GZIP_READ_EXTENSIONS and ".gz" not in READ_EXTENSIONS
+
+
+def test_units_report(tmp_path, cloud):
+    from tpvp.io import UnitChoice, unit_choice
+
+    pts, labels = cloud  # 0.6 m tall
+    mm = write_point_cloud(tmp_path / "mm.xyz", pts * 1000, labels)
+    got, choice = read_point_cloud(mm, return_units=True)
+    np.testing.assert_allclose(got, pts, rtol=1e-12, atol=1e-12)
+    assert isinstance(choice, UnitChoice)
+    assert choice.requested == "auto" and choice.used == "mm"
+    side = float(np.ptp(pts * 1000, axis=0).max())
+    assert choice.largest_side == pytest.approx(side)
+    assert choice.largest_side_m == pytest.approx(side / 1000)
+    assert str(choice) == f"auto -> mm (largest extent {side:.3g} mm)"
+    got, lab, choice = read_point_cloud(_gzip_copy(mm), return_labels=True, return_units=True)
+    np.testing.assert_array_equal(lab, labels)
+    assert choice.used == "mm"
+    metres = write_point_cloud(tmp_path / "m.ply", pts)
+    _, choice = read_point_cloud(metres, return_units=True)
+    assert str(choice).startswith("auto -> m (largest extent 0.")
+    _, choice = read_point_cloud(metres, units="m", return_units=True)
+    assert choice.requested == choice.used == "m"
+    assert unit_choice(pts * 1000) == UnitChoice("auto", "mm", pytest.approx(side))
+    with pytest.raises(ConfigError):
+        unit_choice(pts, "cm")

@@ -15,8 +15,12 @@ from tpvp.nbv import (
     information_gain,
     next_best_view,
 )
+from tpvp.nbv.occupancy import MODE_GAIN, MODE_VISIBILITY, walk
 from tpvp.scene import voxels
+from tpvp.sensor import bruteforce
 from tpvp.sensor.camera import look_at_rotation, pixel_ray_directions
+from tpvp.sensor.grid import build_grid
+from tpvp.sensor.raycast import cast_ray, encode_key_jit
 
 
 def codes(keys):
@@ -408,3 +412,71 @@ def test_tomato_warm_up_nbv(tomato_scene, capsys):
     # Pixel carving removes the unseen background, which made every view's gain alike (~8%).
     assert m.count(UNKNOWN) < 0.2 * points_only.count(UNKNOWN) and spread > 0.3
     assert elapsed < 5.0  # ~0.25 s on 2 cores; loose because the machine is shared
+
+
+def test_map_walk_and_sensor_share_the_dda():
+    """One DDA for both: on a map whose occupied voxels are a sensor scene (the rest unknown), the
+    map's walk visits exactly the brute-force march's voxels and stops on the voxel that the
+    sensor's kernel and its brute-force reference report as the first hit, ray by ray."""
+    rng = np.random.default_rng(11)
+    m = OccupancyMap.empty(np.zeros(3), 0.16)  # 1 cm voxels, keys -17 .. 16 (padding included)
+    res = m.resolution
+    keys = voxels.unique_keys(np.concatenate([
+        rng.integers(-6, 6, size=(150, 3)),
+        np.stack(np.meshgrid([3], np.arange(-5, 5), np.arange(-5, 5), indexing="ij"), -1).reshape(-1, 3)]))
+    grid = build_grid(keys, res)
+    state = np.zeros(m.shape, dtype=np.uint8)
+    state[tuple((keys - m.origin_key).T)] = OCCUPIED
+    m = dataclasses.replace(m, state=state)
+    flat_of_id = np.ravel_multi_index(tuple((grid.keys - m.origin_key).T), m.shape)
+    # Outside the map (entry jump of both), inside the map but outside the sensor's grid box
+    # (the map walks from the camera, the sensor jumps), and inside the grid box between voxels.
+    positions = np.array([[0.3, -0.1, 0.12], [-0.05, 0.31, -0.2], [0.0, 0.0, 0.4],
+                          [0.12, 0.03, 0.02], [-0.1, -0.11, 0.09], [0.065, 0.0, 0.0]])
+    assert not grid.is_occupied(positions).any()
+    empty = np.zeros(0, dtype=np.int64)
+    lo = m.origin_key
+    checked_hits = 0
+    for position in positions:
+        d = pixel_ray_directions(look_at_rotation(position, [0.01, -0.02, 0.0]), stride=40)
+        sensor_slow = bruteforce.march_rays(grid, position, d, max_range=10.0)
+        rays, flats = march(m, position, d, np.inf)  # in walking order, first occupied included
+        for r, (dx, dy, dz) in enumerate(d):
+            sensor = cast_ray(*position, dx, dy, dz, grid.index, grid.clearance, *grid.origin_key,
+                              res, 100.0, np.inf)
+            assert sensor == sensor_slow[r]
+            visited = flats[rays == r]
+            stamp = np.zeros(m.state.size)
+            walk(*position, dx, dy, dz, np.inf, state, lo[0], lo[1], lo[2], res, MODE_VISIBILITY,
+                 True, 0, 0, 0, stamp, 0.5, empty)
+            seen = np.flatnonzero(stamp)
+            order = seen[np.argsort(-stamp[seen], kind="stable")]  # n-th visited: 0.5 ** n
+            np.testing.assert_array_equal(stamp[order], 0.5 ** np.arange(order.size))
+            count = walk(*position, dx, dy, dz, np.inf, state, lo[0], lo[1], lo[2], res, MODE_GAIN,
+                         True, 0, 0, 0, np.zeros(m.state.size), 1.0, empty)
+            assert count == order.size
+            if sensor >= 0:  # the walk stopped on the sensor's first hit
+                checked_hits += 1
+                np.testing.assert_array_equal(visited, np.r_[order, flat_of_id[sensor]])
+            else:
+                np.testing.assert_array_equal(visited, order)
+    assert checked_hits > 100
+
+
+def test_voxel_codes_round_trip_and_range():
+    rng = np.random.default_rng(2)
+    lim = voxels.KEY_OFFSET
+    keys = np.concatenate([rng.integers(-lim, lim, size=(500, 3)),
+                           [[-lim, -lim, -lim], [lim - 1, lim - 1, lim - 1], [-1, 0, 1], [0, 0, 0]]])
+    encoded = voxels.encode_keys(keys)
+    np.testing.assert_array_equal(encoded, codes(keys))  # 21 bits per axis, offset 2^20
+    np.testing.assert_array_equal(voxels.decode_keys(encoded), keys)
+    # Codes sort like the keys (x, then y, then z).
+    np.testing.assert_array_equal(np.argsort(encoded, kind="stable"),
+                                  np.lexsort((keys[:, 2], keys[:, 1], keys[:, 0])))
+    assert [encode_key_jit(*k) for k in keys[-4:]] == encoded[-4:].tolist()  # the kernels' form
+    assert [voxels.encode_key(*map(int, k)) for k in keys[-4:]] == encoded[-4:].tolist()
+    assert voxels.encode_keys(np.zeros((0, 3), np.int64)).shape == (0,)
+    for bad in ([lim, 0, 0], [0, -lim - 1, 0], [0, 0, 2**40]):
+        with pytest.raises(PointCloudError, match="encodable range"):
+            voxels.encode_keys(np.array([[1, 2, 3], bad]))

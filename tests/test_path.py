@@ -12,12 +12,12 @@ from tpvp.path import (
     local_path_length,
     local_path_lengths,
     local_path_points,
+    nearest_neighbour_path,
     obstacle_radius,
     path_length,
     predicted_size,
     shortest_open_path,
 )
-from tpvp.path.tsp import _nearest_neighbour
 
 # --- local path ------------------------------------------------------------------------------
 
@@ -185,7 +185,7 @@ def test_heuristic_never_worse_than_nearest_neighbour_and_close_to_exact():
     for k in range(8):
         d = random_distances(rng, 12, ("sphere", "euclid", "asym")[k % 3])
         end = None if k % 2 else 11
-        nn = path_length(d, _nearest_neighbour(d, 0, end))
+        nn = path_length(d, nearest_neighbour_path(d, 0, end))
         heur = shortest_open_path(d, 0, end, config=TspConfig(method="heuristic"))
         exact = shortest_open_path(d, 0, end, config=TspConfig(method="dp"))
         assert_valid(heur, 12, 0, end)
@@ -201,7 +201,7 @@ def test_heuristic_on_a_large_band_is_fast_and_valid():
     d = random_distances(rng, 150, "euclid")
     res = shortest_open_path(d, 5, 9, config=TspConfig(method="heuristic"))
     assert_valid(res, 150, 5, 9)
-    assert res.length < path_length(d, _nearest_neighbour(d, 5, 9))
+    assert res.length < path_length(d, nearest_neighbour_path(d, 5, 9))
     again = shortest_open_path(d, 5, 9, config=TspConfig(method="heuristic"))
     np.testing.assert_array_equal(res.order, again.order)  # deterministic
 
@@ -275,7 +275,7 @@ def test_band_path_visits_each_band_then_the_other():
     assert res.length == pytest.approx(path_length(eu, res.order))
     # Each band's path is no longer than its nearest-neighbour ordering.
     sub = eu[np.ix_(lower, lower)]
-    assert path_length(sub, np.arange(lower.size)) <= path_length(sub, _nearest_neighbour(sub, 0, None)) + 1e-12
+    assert path_length(sub, np.arange(lower.size)) <= path_length(sub, nearest_neighbour_path(sub, 0, None)) + 1e-12
 
 
 def test_band_path_with_start_position_and_lower_first():

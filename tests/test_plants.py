@@ -1,4 +1,4 @@
-"""Procedural single plants (tpvp.scene.plants)."""
+"""Procedural single plants (tpvp.synthetic.plants)."""
 
 import time
 
@@ -9,7 +9,7 @@ from scipy.spatial import cKDTree
 
 from tpvp.errors import ConfigError
 from tpvp.scene import voxels
-from tpvp.scene.plants import PlantParams, generate_plant, generate_session_pair
+from tpvp.synthetic.plants import PlantParams, generate_plant, generate_session_pair
 
 SPECIES = ("tomato", "maize")
 
@@ -247,7 +247,7 @@ def test_save_session_pair_round_trip(tmp_path):
     import json
 
     from tpvp.io import read_point_cloud
-    from tpvp.scene.plants import save_session_pair
+    from tpvp.synthetic.plants import save_session_pair
 
     pair = generate_session_pair("maize", 3, days=1.0)
     manifest = json.loads(save_session_pair(pair, tmp_path, "m3").read_text())

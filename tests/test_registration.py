@@ -14,7 +14,7 @@ from tpvp.registration import (
 )
 from tpvp.registration.embedded_deformation import _Adam, _anchors, _edges, _warp_numpy
 from tpvp.scene.normalise import normalise_plant
-from tpvp.scene.plants import generate_plant
+from tpvp.synthetic.plants import generate_plant
 
 
 @pytest.fixture(scope="module")

@@ -9,7 +9,7 @@ from tpvp.sensor import bruteforce
 from tpvp.sensor.camera import D435, in_frustum, look_at_rotation, rotation_to_quaternion
 from tpvp.sensor.grid import build_grid
 from tpvp.sensor.raycast import cast_ray
-from tpvp.sensor.sensor import SensorConfig, depth_image, observe, observe_many
+from tpvp.sensor.sensor import SensorConfig, depth_image, observe, observe_many, observe_poses, view_poses
 
 
 def random_scene(seed, n=250, box=14, res=0.01, planes=True):
@@ -119,6 +119,9 @@ def test_observe_many_equals_single_views():
         matrix = observe_many(grid, positions, look_ats, config)
         for row, p, t in zip(matrix, positions, look_ats):
             np.testing.assert_array_equal(np.flatnonzero(row), observe(grid, p, t, config))
+        # The public pose form behind observe_many and the visibility matrix.
+        np.testing.assert_array_equal(observe_poses(grid, *view_poses(grid, positions, look_ats), config),
+                                      matrix)
 
 
 def test_reference_model_matches_bruteforce_on_real_tomato(tomato_scene):

@@ -9,8 +9,7 @@ from scipy import sparse
 from tpvp.errors import ConfigError
 from tpvp.setcover import SetCoverConfig, SetCoverResult, solve_set_cover
 from tpvp.setcover import ilp as ilp_mod
-
-SOLVERS = ("cbc", "highs")
+from tpvp.solvers import SOLVERS
 
 
 def brute_force(matrix, executed=(), candidates=None):

@@ -10,71 +10,101 @@ import json
 import sys
 from pathlib import Path
 
+from tpvp import __version__
 from tpvp.errors import TpvpError
 
+STAGES = ["compile", "scene", "warm-up NBV", "registration", "inflation", "visibility", "view selection",
+          "path", "outputs"]
 
-def _print_case(result, summary, written):
+
+def _print_case(result, summary, written, compile_seconds):
     rows = [("views (warm-up included)", f"{result.n_views}"),
             ("coverage of the oracle set", f"{100 * result.coverage:.2f} %"),
-            ("path length", f"{result.path_length:.2f} m"),
+            ("path length", f"{result.path_length:.2f} m (planning frame; "
+                            f"{summary['path_length_scan_m']:.3f} m in the scan frame)"),
             ("coverage after warm-up", f"{100 * result.coverage_warm_up:.2f} %"),
             ("Chamfer transferred vs coarse", f"{summary['chamfer_before_mm']:.2f} -> {summary['chamfer_after_mm']:.2f} mm"),
-            ("set cover", f"{result.set_cover.objective:g} views, optimal={result.set_cover.optimal}, "
-                          f"{result.set_cover.n_dropped_infeasible} unreachable voxels dropped"),
+            ("view selection", f"{len(result.planned_views)} views, optimal={result.selection.optimal}"
+             + (f", {result.set_cover.n_dropped_infeasible} unreachable voxels dropped"
+                if hasattr(result.set_cover, "n_dropped_infeasible") else "")),
             ("time: warm-up / registration", f"{result.timings['warm_up']:.2f} s / {result.timings['registration']:.2f} s"),
-            ("time: planning (inflation..path)", f"{result.timings['planning']:.2f} s")]
+            ("time: planning (inflation..path)", f"{result.timings['planning']:.2f} s"),
+            ("time: numba compile / cache load", f"{compile_seconds:.2f} s (not part of the run)")]
     width = max(len(k) for k, _ in rows)
     for key, value in rows:
         print(f"  {key:<{width}}  {value}")
-    print(f"wrote {written['results'].parent}/ (results, plan.csv/json, plan.png, coverage.png, recording.rrd)")
+    print(f"wrote {written['results'].parent}/ (results, plan.csv in the scan frame, plan_normalised.csv, "
+          f"plan.json, config.yaml, provenance.json, plan.png, coverage.png, recording.rrd)")
 
 
-def _run_pair(previous, current, output, view_space, initial_view, units="auto", name="case"):
+def _config(args):
+    """The resolved configuration: --config, then the dedicated options, then --set overrides."""
+    from tpvp.config import load_config, parse_overrides
+
+    overrides = {}
+    for key, value in (("view_space", args.view_space), ("initial_view", args.initial_view),
+                       ("scene.scale", args.scale), ("scene.radius", args.radius), ("scene.up_axis", args.up_axis)):
+        if value is not None:
+            overrides[key] = value
+    overrides.update(parse_overrides(args.set))
+    config = load_config(args.config, overrides)
+    from tpvp.viewspace import get_view_space
+
+    get_view_space(config.view_space).view_index(config.initial_view)  # refuse before any work
+    return config
+
+
+def _run_pair(previous, current, output, config, name="case"):
     from tqdm.auto import tqdm
 
-    from tpvp.experiments.single_plant import SinglePlantConfig, build_scene, run_case, write_case_outputs
+    from tpvp.experiments.outputs import write_case_outputs
+    from tpvp.experiments.single_plant import build_scene, run_case
+    from tpvp.jit import compile_kernels
 
-    config = SinglePlantConfig(view_space=view_space, initial_view=initial_view)
-    stages = ["scene", "warm-up NBV", "registration", "inflation", "visibility", "set cover", "path", "outputs"]
-    with tqdm(total=len(stages), desc="tpvp", unit="stage", leave=False) as bar:
-        bar.set_postfix_str("scene")
-        scene = build_scene(previous, current, config)
-
+    with tqdm(total=len(STAGES), desc="tpvp", unit="stage", leave=False) as bar:
         def step(stage):
             bar.update(1)
             bar.set_postfix_str(stage)
 
+        bar.set_postfix_str("compile")
+        compile_seconds = compile_kernels()
+        step("scene")
+        scene = build_scene(previous, current, config)
         result = run_case(scene, config, progress=step)
         step("outputs")
-        written = write_case_outputs(output, scene, result, config, name)
+        written = write_case_outputs(output, scene, result, config, name,
+                                     extra_summary={"seconds_compile": compile_seconds})
         bar.update(1)
-    _print_case(result, result.summary(), written)
+    _print_case(result, json.loads(written["results"].read_text()), written, compile_seconds)
     return 0
 
 
 def _demo(args) -> int:
     from tpvp.scene.samples import load_sample
 
+    config = _config(args)
     print("bundled real tomato (Pheno4D): previous session 2020-03-05, current 2020-03-06, "
-          f"{args.view_space} view space")
-    return _run_pair(load_sample("tomato_0305"), load_sample("tomato_0306"), args.output, args.view_space,
-                     args.initial_view, name="tomato 03-05 -> 03-06")
+          f"{config.view_space} view space, configuration {config.name!r}")
+    return _run_pair(load_sample("tomato_0305"), load_sample("tomato_0306"), args.output, config,
+                     name="tomato 03-05 -> 03-06")
 
 
 def _plan(args) -> int:
     from tpvp.io import read_point_cloud
 
-    previous = read_point_cloud(args.previous, units=args.units)
-    current = read_point_cloud(args.current, units=args.units)
-    return _run_pair(previous, current, args.output, args.view_space, args.initial_view, name=args.current.name)
+    config = _config(args)
+    previous, previous_units = read_point_cloud(args.previous, units=args.units, return_units=True)
+    current, current_units = read_point_cloud(args.current, units=args.units, return_units=True)
+    print(f"{args.previous.name}: units: {previous_units}; {args.current.name}: units: {current_units}")
+    return _run_pair(previous, current, args.output, config, name=args.current.name)
 
 
 def _render(args) -> int:
     from tpvp.experiments.render_demo import RenderDemoConfig, run_render_demo
     from tpvp.io import atomic_write_text
 
-    table, summary = run_render_demo(RenderDemoConfig(view_space=args.view_space, model=args.model))
     out = Path(args.output)
+    table, summary = run_render_demo(RenderDemoConfig(view_space=args.view_space, model=args.model), output=out)
     atomic_write_text(out / "coverage_per_view.csv", table.to_csv(index=False))
     atomic_write_text(out / "summary.json", json.dumps(summary, indent=2) + "\n")
     print(f"bundled real tomato ({summary['sample']}): {summary['plant_voxels']} plant voxels at 2 mm, "
@@ -84,43 +114,88 @@ def _render(args) -> int:
           f"{summary['render_ms_per_view']:.1f} ms/view)")
     print(table[["view", "seen_voxels", "new_voxels", "coverage"]].to_string(
         index=False, formatters={"coverage": "{:.2%}".format}))
-    print(f"wrote {out / 'coverage_per_view.csv'} and {out / 'summary.json'}")
+    print(f"wrote {', '.join([str(out / 'coverage_per_view.csv'), str(out / 'summary.json'), *summary['depth_images']])}")
     return 0
 
 
-def _view_space(value: str) -> str:
-    if value in ("hemisphere", "sphere") or Path(value).is_file():
-        return value
-    raise argparse.ArgumentTypeError(f"{value!r} is neither 'hemisphere', 'sphere' nor an existing file")
+def _show_config(args) -> int:
+    from tpvp.config import config_yaml, derived_table
+
+    config = _config(args)
+    print(config_yaml(config, f"resolved configuration {config.name!r} (setting: {config.setting})"), end="")
+    if args.derived:
+        print("# derived parameters (unless set explicitly):")
+        for key, rule in derived_table(config.setting):
+            print(f"#   {key} = {rule}")
+    return 0
+
+
+def _view_space_arg(value: str) -> str:
+    from tpvp.viewspace import get_view_space
+
+    try:
+        get_view_space(value)  # one clear error line for an unknown name or a bad file
+    except TpvpError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return value
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from tpvp.config import SCALES, UP_AXES
+    from tpvp.viewspace import view_space_choices
+
     parser = argparse.ArgumentParser(prog="tpvp", description=__doc__.splitlines()[0])
+    parser.add_argument("--version", action="version", version=f"tpvp {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
 
     def common(p, output):
-        p.add_argument("--output", default=output, help="output folder (default: %(default)s)")
-        p.add_argument("--view-space", default="hemisphere", type=_view_space,
-                       help="hemisphere (32 views, with table), sphere (63 views) or a file (default: %(default)s)")
-        p.add_argument("--initial-view", type=int, default=17,
-                       help="index of the initial view: 17 near-horizontal, 8 oblique, 21 near-top (default: %(default)s)")
+        if output is not None:
+            p.add_argument("--output", default=output, help="output folder (default: %(default)s)")
+        p.add_argument("--config", default="paper", metavar="NAME|FILE",
+                       help="named configuration (paper) or a YAML file, e.g. a run's config.yaml (default: %(default)s)")
+        p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                       help="override one configuration key, e.g. --set registration.embedded_deformation.iterations=100 "
+                            "(repeatable; `tpvp config --derived` lists the keys)")
+        p.add_argument("--view-space", default=None, type=_view_space_arg, metavar="SPACE",
+                       help=f"candidate views: {view_space_choices()} (default: the configuration's, hemisphere)")
+        p.add_argument("--initial-view", default=None, metavar="INDEX|NAME",
+                       help="initial view: an index or near_horizontal (17), oblique (8), near_top (21) "
+                            "(default: the configuration's, 17)")
+        p.add_argument("--scale", default=None, choices=SCALES,
+                       help="normalised: the paper's protocol, plant scaled to a 0.24 m largest side; native: plan "
+                            "at the plant's true size with --radius (default: normalised)")
+        p.add_argument("--radius", default=None, type=float, metavar="M",
+                       help="view-sphere radius in metres (native: around the real plant, default 0.4; "
+                            "normalised: default the view space's 0.4)")
+        p.add_argument("--up-axis", default=None, choices=UP_AXES,
+                       help="the scan axis that points up; the plant is turned so that it becomes +Z (default: +z)")
 
     demo = sub.add_parser("demo", help="plan and execute on the bundled real tomato pair (no arguments needed)")
     common(demo, "outputs/demo")
     demo.set_defaults(func=_demo)
     plan = sub.add_parser("plan", help="plan the current session of your own plant from two scans")
-    plan.add_argument("--previous", required=True, type=Path, help="previous-session scan (ply/pcd/xyz/txt/obj)")
+    plan.add_argument("--previous", required=True, type=Path,
+                      help="previous-session scan (ply/pcd/xyz/txt/pts/csv/obj/stl, optionally .gz)")
     plan.add_argument("--current", required=True, type=Path,
-                      help="current-session scan; in the simulator it is the ground truth")
-    plan.add_argument("--units", default="auto", choices=["auto", "m", "mm"])
+                      help="current-session scan (same formats); in the simulator it is the ground truth")
+    plan.add_argument("--units", default="auto", choices=["auto", "m", "mm"],
+                      help="units of the scans; auto: millimetres when the largest extent exceeds 10, and "
+                           "says which it chose (default: %(default)s)")
     common(plan, "outputs/plan")
     plan.set_defaults(func=_plan)
-    render = sub.add_parser("render", help="render the bundled real tomato from every view; coverage per view")
-    render.add_argument("--output", default="outputs/render")
-    render.add_argument("--view-space", default="hemisphere", choices=["hemisphere", "sphere"])
+    render = sub.add_parser("render", help="render the bundled real tomato from every view: coverage per view "
+                                           "and depth images of a few views")
+    render.add_argument("--output", default="outputs/render", help="output folder (default: %(default)s)")
+    render.add_argument("--view-space", default="hemisphere", choices=["hemisphere", "sphere"],
+                        help="hemisphere (with table) or sphere (no table) (default: %(default)s)")
     render.add_argument("--model", default="reference", choices=["reference", "pixel"],
                         help="sensor model (default: the authors' voxel-driven 'reference')")
     render.set_defaults(func=_render)
+    show = sub.add_parser("config", help="print the resolved configuration as YAML (save it, edit it, pass it "
+                                         "back with --config)")
+    common(show, None)
+    show.add_argument("--derived", action="store_true", help="also list the derived parameters and their rules")
+    show.set_defaults(func=_show_config)
     return parser
 
 
@@ -138,7 +213,8 @@ def run_command(args, name: str) -> int:
 
 
 def main(argv=None) -> int:
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    args = parser.parse_args(argv)
     return run_command(args, f"tpvp {args.command}")
 
 

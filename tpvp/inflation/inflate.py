@@ -1,11 +1,11 @@
 """Conservative inflation of the transferred geometry (paper "Conservative Inflation",
-P~+ = P~ u Q u I; reference part C of shared/docs/registration_inflation_reference.md).
+P~+ = P~ u Q u I; docs/single_plant.md#inflation).
 
 An inflation point is near the current coarse reconstruction Q but far from the warped previous
 session P~: new growth that Q saw and P~ lacks.
 
-* :func:`inflate` - single plant (reference C1): candidates on a regular grid, KD-tree distances.
-* :func:`inflate_voxels` - greenhouse rows (reference C2): voxel-set morphology.
+* :func:`inflate` - single plant (docs/single_plant.md#inflation): candidates on a regular grid, KD-tree distances.
+* :func:`inflate_voxels` - greenhouse rows (docs/greenhouse.md#inflation): voxel-set morphology.
 
 Deviation from the single-plant reference: when no candidate survives, the authors' code plans on
 P~ alone and drops Q as well; here Q is always part of the planning cloud (the paper's equation,
@@ -32,14 +32,15 @@ class InflationConfig:
 
     step: candidate grid spacing (m). gamma_near: keep a candidate only if its nearest Q point is
     closer than this (strict). gamma_far: ... and its nearest P~ point farther than this (strict).
-    add_current: the reference's ``add_current_inflation`` switch; False is the "w/o inflation"
-    ablation (I is empty, the planning cloud is P~ u Q).
+    enabled: False is the paper's "w/o inflation" ablation (Table III): the planning cloud is the
+    aligned previous session P~ alone (no I, no Q). The one switch for it; the reference's
+    ``add_current_inflation=False`` (planning on P~ u Q) is not offered.
     """
 
     step: float = 0.004
     gamma_near: float = 0.003
     gamma_far: float = 0.005
-    add_current: bool = True
+    enabled: bool = True
 
     def __post_init__(self):
         for name in ("step", "gamma_near", "gamma_far"):
@@ -100,19 +101,21 @@ def inflate(P_warped, Q, centre, half_size: float, config: InflationConfig | Non
         raise ConfigError(f"config must be an InflationConfig, got {type(config).__name__}")
     P_warped = checked_cloud(P_warped, "warped previous cloud P~")
     Q = checked_cloud(Q, "current cloud Q")
+    if not config.enabled:
+        counts = {"candidates": 0, "near_current": 0, "inflation": 0, "warped": len(P_warped),
+                  "current": len(Q), "planning": len(P_warped)}
+        return InflationResult(inflation=np.zeros((0, 3)), planning=P_warped, counts=counts)
     cand = candidate_grid(centre, half_size, config.step)
     n_cand = len(cand)
-    near_count = 0
     inflation = np.zeros((0, 3))
-    if config.add_current:
-        # Q first: only a thin shell around Q survives, so the P~ query runs on few points.
-        # The upper bounds let the KD-tree prune; the strict tests decide.
-        d_q = cKDTree(Q).query(cand, distance_upper_bound=2 * config.gamma_near)[0]
-        cand = cand[d_q < config.gamma_near]
-        near_count = len(cand)
-        if near_count:
-            d_p = cKDTree(P_warped).query(cand, distance_upper_bound=2 * config.gamma_far)[0]
-            inflation = cand[d_p > config.gamma_far]  # inf (nothing within the bound) counts as far
+    # Q first: only a thin shell around Q survives, so the P~ query runs on few points.
+    # The upper bounds let the KD-tree prune; the strict tests decide.
+    d_q = cKDTree(Q).query(cand, distance_upper_bound=2 * config.gamma_near)[0]
+    cand = cand[d_q < config.gamma_near]
+    near_count = len(cand)
+    if near_count:
+        d_p = cKDTree(P_warped).query(cand, distance_upper_bound=2 * config.gamma_far)[0]
+        inflation = cand[d_p > config.gamma_far]  # inf (nothing within the bound) counts as far
     planning = np.concatenate([P_warped, Q, inflation])
     counts = {"candidates": n_cand, "near_current": near_count, "inflation": len(inflation),
               "warped": len(P_warped), "current": len(Q), "planning": len(planning)}
@@ -121,7 +124,7 @@ def inflate(P_warped, Q, centre, half_size: float, config: InflationConfig | Non
 
 def inflate_voxels(P_warped, Q, voxel: float = 0.01, gamma_near: float = 0.01, gamma_far: float = 0.01,
                    roi_centre=None, roi_half=None) -> InflationResult:
-    """Greenhouse-row inflation by voxel morphology (reference C2).
+    """Greenhouse-row inflation by voxel morphology (docs/greenhouse.md#inflation).
 
     Keys floor(p / voxel); C = voxels of Q, H = voxels of P~; I = centres of
     dilate(C, gamma_near) minus dilate(H, gamma_far) minus C, the dilation by all integer offsets with

@@ -10,13 +10,20 @@ scanned in millimetres spans tens to hundreds of units); otherwise it is metres,
 coordinates reach |c| >= 10 (the reference simulator's mm switch), because a small extent far from
 the origin is a metric scan with an offset, not a plant under 1 cm tall. That ambiguous case is
 reported with a warning. After conversion a cloud larger than 100 m, or (for an explicit
-``units="mm"``) smaller than 1 mm, raises :class:`~tpvp.errors.PointCloudError`.
+``units="mm"``) smaller than 1 mm, raises :class:`~tpvp.errors.PointCloudError`. To tell the user
+what ``"auto"`` chose, ask ``read_point_cloud(..., return_units=True)`` (or :func:`unit_choice` on a
+raw array) for a :class:`UnitChoice`; ``str()`` of it reads ``auto -> mm (largest extent 230 mm)``.
+
+Every format can be read gzip-compressed (``scan.ply.gz``, ``scan.xyz.gz``, ``mesh.obj.gz``, ...):
+the file is decompressed in memory and parsed like the plain file, errors still name it.
 """
 
 from __future__ import annotations
 
+import gzip
 import io
 import logging
+import zlib
 import os
 import re
 import warnings
@@ -33,8 +40,12 @@ __all__ = [
     "write_point_cloud",
     "read_text_table",
     "detect_units",
+    "unit_choice",
+    "UnitChoice",
     "to_metres",
+    "cloud_extension",
     "READ_EXTENSIONS",
+    "GZIP_READ_EXTENSIONS",
     "WRITE_EXTENSIONS",
 ]
 
@@ -57,6 +68,8 @@ LABEL_NAMES = ("label", "labels", "class", "classification", "scalar_label", "se
 TEXT_EXTENSIONS = (".xyz", ".txt", ".pts", ".csv")
 MESH_EXTENSIONS = (".obj", ".stl", ".off", ".glb")
 READ_EXTENSIONS = (".ply", ".pcd") + TEXT_EXTENSIONS + MESH_EXTENSIONS
+#: Every readable format also gzip-compressed (``.ply.gz``, ``.xyz.gz``, ...).
+GZIP_READ_EXTENSIONS = tuple(e + ".gz" for e in READ_EXTENSIONS)
 WRITE_EXTENSIONS = (".ply", ".pcd") + TEXT_EXTENSIONS
 
 
@@ -104,6 +117,30 @@ def detect_units(points, source=None) -> str:
     return "m"
 
 
+class UnitChoice(NamedTuple):
+    """Which units a cloud was read in: ``str()`` gives ``auto -> mm (largest extent 230 mm)``."""
+
+    requested: str  # "auto", "m" or "mm", as asked
+    used: str  # "m" or "mm": what the file's numbers were taken to be
+    largest_side: float  # largest bounding-box side in the file's units (``used``)
+
+    @property
+    def largest_side_m(self) -> float:
+        return self.largest_side * (1e-3 if self.used == "mm" else 1.0)
+
+    def __str__(self) -> str:
+        return f"{self.requested} -> {self.used} (largest extent {self.largest_side:.3g} {self.used})"
+
+
+def unit_choice(points, units: str = "auto", source=None) -> UnitChoice:
+    """The :class:`UnitChoice` for raw (file-unit) points: :func:`detect_units` for "auto"."""
+    if units not in UNITS:
+        raise ConfigError(f"units must be one of {UNITS}, got {units!r}")
+    pts = _as_points(points)
+    used = detect_units(pts, source) if units == "auto" else units
+    return UnitChoice(units, used, _largest_side(pts))
+
+
 def to_metres(points, units: str = "auto", source=None) -> np.ndarray:
     """Return a new float64 (N, 3) array in metres; ``units`` is "auto", "m" or "mm".
 
@@ -115,6 +152,10 @@ def to_metres(points, units: str = "auto", source=None) -> np.ndarray:
         raise ConfigError(f"units must be one of {UNITS}, got {units!r}")
     pts = _as_points(points)
     used = detect_units(pts, source) if units == "auto" else units
+    return _scaled(pts, units, used, source)
+
+
+def _scaled(pts: np.ndarray, units: str, used: str, source) -> np.ndarray:
     out = pts * (1e-3 if used == "mm" else 1.0)
     side = _largest_side(out)
     if side > MAX_EXTENT_M:
@@ -138,7 +179,35 @@ def to_metres(points, units: str = "auto", source=None) -> np.ndarray:
 # shared helpers
 
 
+def _is_gzip(path: Path) -> bool:
+    return path.suffix.lower() == ".gz"
+
+
+def cloud_extension(path) -> tuple[str, bool]:
+    """``(format extension, gzip-compressed)`` of a file name, lower case:
+    ``scan.PLY.gz`` -> ``(".ply", True)``, ``scan.xyz`` -> ``(".xyz", False)``. Test
+    ``cloud_extension(p)[0] in READ_EXTENSIONS`` to know whether :func:`read_point_cloud` takes it."""
+    path = Path(path)
+    if _is_gzip(path):
+        return Path(path.stem).suffix.lower(), True
+    return path.suffix.lower(), False
+
+
+def _gunzip(path: Path, data: bytes) -> bytes:
+    try:
+        out = gzip.decompress(data)
+    except EOFError:
+        raise InputFileError(f"{path}: truncated gzip file (the compressed data ends early; "
+                             f"the download or copy is incomplete)") from None
+    except (gzip.BadGzipFile, zlib.error, OSError) as exc:
+        raise InputFileError(f"{path}: not a valid gzip file ({exc})") from None
+    if not out:
+        raise InputFileError(f"{path}: empty file (0 bytes after gzip decompression)")
+    return out
+
+
 def _read_bytes(path: Path) -> bytes:
+    """The file's bytes, decompressed when its name ends in ``.gz``."""
     try:
         data = path.read_bytes()
     except FileNotFoundError:
@@ -149,6 +218,8 @@ def _read_bytes(path: Path) -> bytes:
         raise InputFileError(f"{path}: cannot read: {exc.strerror or exc}") from None
     if not data:
         raise InputFileError(f"{path}: empty file (0 bytes)")
+    if _is_gzip(path):
+        data = _gunzip(path, data)
     return data
 
 
@@ -317,7 +388,7 @@ def read_text_table(path, columns: int | None = None, count_header="auto", *, na
     True requires it, False never uses it. A declared count must match. ``columns`` requires that
     many columns. A file holding a single number returns shape (1, 1). '#' starts a comment.
     With ``names`` a first line of column names is allowed and ``(table, lower-case names or
-    None)`` is returned.
+    None)`` is returned. A name ending in ``.gz`` is decompressed first.
     """
     if count_header not in ("auto", True, False):
         raise ConfigError(f"count_header must be 'auto', True or False, got {count_header!r}")
@@ -848,9 +919,14 @@ def _read_pcd(path: Path, return_labels: bool):
 def _read_mesh(path: Path, mesh_samples: int, seed: int):
     import trimesh  # imported lazily: only meshes need it
 
-    _check_file(path)
+    ext, compressed = cloud_extension(path)
+    if compressed:
+        source, kwargs = io.BytesIO(_read_bytes(path)), {"file_type": ext.lstrip(".")}
+    else:
+        _check_file(path)
+        source, kwargs = str(path), {}
     try:
-        mesh = trimesh.load(str(path), force="mesh", process=False)
+        mesh = trimesh.load(source, force="mesh", process=False, **kwargs)
     except Exception as exc:  # trimesh raises many unrelated types on bad files
         reason = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
         raise InputFileError(f"{path}: cannot read mesh: {reason}") from None
@@ -889,15 +965,19 @@ def _drop_nonfinite(path, pts, labels, drop_invalid):
 
 
 def read_point_cloud(path, units: str = "auto", return_labels: bool = False, *,
-                     drop_invalid: bool = False, mesh_samples: int = 100_000, seed: int = 0):
+                     drop_invalid: bool = False, mesh_samples: int = 100_000, seed: int = 0,
+                     return_units: bool = False):
     """Read a point cloud as float64 (N, 3) metres (``(points, labels or None)`` with
     ``return_labels``).
 
     Formats by extension (case-insensitive): .ply (ascii / binary LE / binary BE), .pcd (ascii,
     binary, binary_compressed), .xyz .txt .pts .csv (3+ columns: x y z, then an optional integer
     label), and meshes .obj .stl .off .glb, surface-sampled with ``mesh_samples`` points
-    (deterministic for a given ``seed``). ``units``: "auto", "m" or "mm" (see module doc).
-    NaN/inf points raise PointCloudError unless ``drop_invalid`` is True.
+    (deterministic for a given ``seed``); each of them also gzip-compressed (``.ply.gz``, ...).
+    ``units``: "auto", "m" or "mm" (see module doc). NaN/inf points raise PointCloudError unless
+    ``drop_invalid`` is True. With ``return_units`` a :class:`UnitChoice` is appended to the
+    result (``(points, choice)`` or ``(points, labels, choice)``); ``str(choice)`` reads
+    ``auto -> mm (largest extent 230 mm)``.
     """
     if not isinstance(path, (str, os.PathLike)):
         raise ConfigError(f"path must be a file path, got {type(path).__name__}")
@@ -909,7 +989,7 @@ def read_point_cloud(path, units: str = "auto", return_labels: bool = False, *,
     path = Path(path)
     if not path.exists():
         raise InputFileError(f"{path}: file not found")
-    ext = path.suffix.lower()
+    ext, compressed = cloud_extension(path)
     if ext == ".ply":
         pts, labels = _read_ply(path, return_labels)
     elif ext == ".pcd":
@@ -919,15 +999,18 @@ def read_point_cloud(path, units: str = "auto", return_labels: bool = False, *,
     elif ext in MESH_EXTENSIONS:
         pts, labels = _read_mesh(path, mesh_samples, seed)
     else:
-        raise InputFileError(f"{path}: unknown point-cloud extension {ext or '(none)'!r} "
-                             f"(supported: {' '.join(READ_EXTENSIONS)})")
+        what = f"{ext or '(none)'}.gz" if compressed else (ext or "(none)")
+        raise InputFileError(f"{path}: unknown point-cloud extension {what!r} "
+                             f"(supported: {' '.join(READ_EXTENSIONS)}, each optionally .gz)")
     pts, labels = _drop_nonfinite(path, pts, labels, drop_invalid)
     if len(pts) == 0:
         raise PointCloudError(f"{path}: holds no points")
-    pts = to_metres(pts, units, source=path)
-    if return_labels:
-        return pts, labels
-    return pts
+    choice = unit_choice(pts, units, source=path)
+    pts = _scaled(_as_points(pts), units, choice.used, path)
+    out = (pts, labels) if return_labels else (pts,)
+    if return_units:
+        out = (*out, choice)
+    return out if len(out) > 1 else out[0]
 
 
 # --------------------------------------------------------------------------------------------

@@ -1,4 +1,4 @@
-"""Geometric information gain of candidate views and the next best view (SPEC.md).
+"""Geometric information gain of candidate views and the next best view (docs/sensor.md#information-gain).
 
 A view casts one ray per pixel ``(u, v)`` with ``u, v = 0, stride, 2 stride, ...`` (every 4th
 pixel for single plants) through the occupancy map; a ray walks the map's voxels until the first
@@ -77,7 +77,9 @@ def information_gain(occupancy: OccupancyMap, positions, look_ats, stride: int =
     out = np.zeros(len(positions), dtype=np.float64 if visibility else np.int64)
     if len(positions):
         k = intrinsics
-        _gains(np.ascontiguousarray(positions), np.ascontiguousarray(rotations), k.fx, k.fy, k.cx,
+        # Writable C-ordered copies: numba compiles a kernel once per argument type, and read-only
+        # arrays (a view space's positions) are a type of their own.
+        _gains(np.array(positions, order="C"), np.array(rotations, order="C"), k.fx, k.fy, k.cx,
                k.cy, int(k.width), int(k.height), int(stride), float(max_range),
                # The map's state is read-only and the shared walker is typed for writable arrays;
                # the copy (tens of kB) is not written to.

@@ -1,4 +1,4 @@
-"""Occupancy map of what has been observed (NBV baselines and the warm-up, SPEC.md).
+"""Occupancy map of what has been observed (NBV baselines and the warm-up, docs/single_plant.md#occupancy-map).
 
 The map is a dense three-state grid (unknown / free / occupied) over the cube ``centre +-
 predicted_size`` (plus padding), with ``predicted_size = 17/16 * max |observed point - centre|`` and
@@ -16,7 +16,7 @@ their order.
 
 Rays walk the exact DDA of :mod:`tpvp.sensor.raycast` (same closed-form event times, ties to the
 lowest axis). A ray that starts outside the map may jump to where it enters the map's box; the jump
-reproduces the state of the plain step-by-step walk exactly (see ``_key_after``).
+reproduces the state of the plain step-by-step walk exactly (see ``tpvp.sensor.raycast.key_after``).
 """
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ from numba import njit
 from tpvp.errors import ConfigError, PointCloudError
 from tpvp.scene import voxels
 from tpvp.sensor.camera import D435, Intrinsics, look_at_rotation
-from tpvp.sensor.raycast import _key_after, event_time
+from tpvp.sensor.raycast import dda_step, encode_key_jit, event_times, keys_after, ray_setup, slab
 
 UNKNOWN = np.uint8(0)
 FREE = np.uint8(1)
@@ -41,7 +41,7 @@ _MAX_CELLS = 50_000_000
 
 @dataclass(frozen=True)
 class OccupancyMapConfig:
-    """Map geometry (defaults: SPEC.md single-plant values)."""
+    """Map geometry (defaults: docs/single_plant.md#occupancy-map)."""
 
     voxels_across: int = 32  # voxel = 2 * predicted_size / voxels_across
     size_factor: float = 17 / 16  # predicted_size = size_factor * max distance centre -> point
@@ -68,7 +68,7 @@ def _as_points(points, name: str) -> np.ndarray:
 
 
 def _as_position(position, name: str) -> np.ndarray:
-    arr = np.asarray(position, dtype=np.float64)
+    arr = np.array(position, dtype=np.float64)  # a writable copy: one kernel type for all callers
     if arr.size != 3 or not np.all(np.isfinite(arr)):
         raise ConfigError(f"{name} must be 3 finite coordinates, got {np.asarray(position).tolist()!r}")
     return arr.reshape(3)
@@ -107,7 +107,7 @@ class OccupancyMap:
     def from_observations(cls, centre, view_positions, observed_points_per_view,
                           config: OccupancyMapConfig = OccupancyMapConfig(), look_ats=None,
                           **carving) -> OccupancyMap:
-        """Map sized on all observed points (SPEC), then every view integrated.
+        """Map sized on all observed points (docs/single_plant.md#occupancy-map), then every view integrated.
 
         ``look_ats`` (one ``(3,)`` point for all views, or ``(V, 3)``) turns on pixel-ray carving
         (see :meth:`integrate`, which receives ``carving``: ``stride``, ``max_range``,
@@ -180,7 +180,7 @@ class OccupancyMap:
             k = intrinsics
             _carve_pixels(position, rotation, k.fx, k.fy, k.cx, k.cy, int(k.width), int(k.height),
                           int(stride), float(max_range), state, self.origin_key, self.resolution,
-                          own, _encode_sorted(outer))
+                          own, np.unique(voxels.encode_keys(outer)))
         state.setflags(write=False)
         return replace(self, state=state)
 
@@ -205,38 +205,10 @@ class OccupancyMap:
         return out
 
 
-@njit(cache=True, inline="always")
-def _slab(o, d, inv, k0, lo, n, res):
-    """Ray-parameter interval inside the map's slab along one axis, as exact DDA event times."""
-    if d > 0.0:
-        return (lo * res - o) * inv, ((lo + n) * res - o) * inv
-    if d < 0.0:
-        return ((lo + n) * res - o) * inv, (lo * res - o) * inv
-    if lo <= k0 < lo + n:
-        return -np.inf, np.inf
-    return np.inf, -np.inf
-
-
 MODE_GAIN = 0
 MODE_CARVE = 1
 MODE_FREESPACE = 2
 MODE_VISIBILITY = 3
-
-_KEY_OFFSET = 1 << 20  # out-of-map keys are encoded in 21 bits per axis
-
-
-def _encode_sorted(keys) -> np.ndarray:
-    """Sorted int64 codes of voxel keys ``(n, 3)`` (see ``_code``)."""
-    keys = np.asarray(keys, dtype=np.int64).reshape(-1, 3)
-    if keys.size and np.abs(keys).max() >= _KEY_OFFSET:
-        raise ConfigError("observed points too far from the origin for the map's voxel size")
-    k = keys + _KEY_OFFSET
-    return np.unique((k[:, 0] << 42) | (k[:, 1] << 21) | k[:, 2])
-
-
-@njit(cache=True, inline="always")
-def _code(kx, ky, kz):
-    return ((kx + _KEY_OFFSET) << 42) | ((ky + _KEY_OFFSET) << 21) | (kz + _KEY_OFFSET)
 
 
 @njit(cache=True, inline="always")
@@ -259,39 +231,30 @@ def walk(ox, oy, oz, dx, dy, dz, t_stop, state, lo0, lo1, lo2, res, mode, skip,
     whose ``stamp`` was not yet ``tag`` (and stamp them). ``MODE_CARVE``: stop on reaching voxel
     ``(ex, ey, ez)``; mark every unknown voxel visited before it free; return 0.
     ``MODE_FREESPACE``: stop on reaching a voxel whose ``stamp`` is ``tag`` (in the map) or whose
-    code is in the sorted ``outer`` (out of it); mark every unknown voxel visited before it free.
+    code (:func:`tpvp.scene.voxels.encode_key`) is in the sorted ``outer`` (out of it); mark every
+    unknown voxel visited before it free.
     ``MODE_VISIBILITY``: as ``MODE_GAIN``, but raise ``stamp`` of the ``n``-th unknown
     voxel visited (from 0) to at least ``tag ** n``; return 0.
     ``skip`` jumps to the map's box first (exact, but it would also skip a carving end voxel
-    lying before the box, so carving walks from the camera).
+    lying before the box, so carving walks from the camera). The stepping is the sensor's DDA
+    (:mod:`tpvp.sensor.raycast`): same start, entry jump and steps.
     """
     n0, n1, n2 = state.shape
-    sx = 1 if dx > 0 else (-1 if dx < 0 else 0)
-    sy = 1 if dy > 0 else (-1 if dy < 0 else 0)
-    sz = 1 if dz > 0 else (-1 if dz < 0 else 0)
-    inv_x = 1.0 / dx if sx != 0 else 0.0
-    inv_y = 1.0 / dy if sy != 0 else 0.0
-    inv_z = 1.0 / dz if sz != 0 else 0.0
-    kx = np.int64(np.floor(ox / res))
-    ky = np.int64(np.floor(oy / res))
-    kz = np.int64(np.floor(oz / res))
+    sx, sy, sz, inv_x, inv_y, inv_z, kx, ky, kz = ray_setup(ox, oy, oz, dx, dy, dz, res)
     if skip:
-        a0, b0 = _slab(ox, dx, inv_x, kx, lo0, n0, res)
-        a1, b1 = _slab(oy, dy, inv_y, ky, lo1, n1, res)
-        a2, b2 = _slab(oz, dz, inv_z, kz, lo2, n2, res)
+        # The map's box exactly (its border voxels may be unknown, unlike the sensor's padding).
+        a0, b0 = slab(ox, dx, inv_x, lo0 * res, (lo0 + n0) * res, lo0 <= kx < lo0 + n0)
+        a1, b1 = slab(oy, dy, inv_y, lo1 * res, (lo1 + n1) * res, lo1 <= ky < lo1 + n1)
+        a2, b2 = slab(oz, dz, inv_z, lo2 * res, (lo2 + n2) * res, lo2 <= kz < lo2 + n2)
         t_enter = max(0.0, max(a0, max(a1, a2)))
         t_exit = min(b0, min(b1, b2))
         if t_enter > t_exit or t_enter > t_stop:
             return 0
         if t_enter > 0.0:
             # State after every event with t < t_enter: the voxel just before the box.
-            kx0, ky0, kz0 = kx, ky, kz
-            kx = _key_after(ox, dx, inv_x, sx, kx0, t_enter, res)
-            ky = _key_after(oy, dy, inv_y, sy, ky0, t_enter, res)
-            kz = _key_after(oz, dz, inv_z, sz, kz0, t_enter, res)
-    tx = event_time(kx, sx, res, ox, inv_x)
-    ty = event_time(ky, sy, res, oy, inv_y)
-    tz = event_time(kz, sz, res, oz, inv_z)
+            kx, ky, kz = keys_after(ox, oy, oz, dx, dy, dz, inv_x, inv_y, inv_z, sx, sy, sz,
+                                    kx, ky, kz, t_enter, res)
+    tx, ty, tz = event_times(kx, ky, kz, sx, sy, sz, ox, oy, oz, inv_x, inv_y, inv_z, res)
     count = 0
     weight = 1.0
     while True:
@@ -323,25 +286,14 @@ def walk(ox, oy, oz, dx, dy, dz, t_stop, state, lo0, lo1, lo2, res, mode, skip,
               or (iy >= n1 and sy >= 0) or (iz < 0 and sz <= 0) or (iz >= n2 and sz >= 0)):
             return count  # outside and not approaching the (convex) box: it never comes back
         elif mode == MODE_FREESPACE and outer.size > 0:
-            code = _code(kx, ky, kz)
+            code = encode_key_jit(kx, ky, kz)
             j = np.searchsorted(outer, code)
             if j < outer.size and outer[j] == code:
                 return 0
-        if tx <= ty and tx <= tz:
-            if tx > t_stop:
-                return count
-            kx += sx
-            tx = event_time(kx, sx, res, ox, inv_x)
-        elif ty <= tz:
-            if ty > t_stop:
-                return count
-            ky += sy
-            ty = event_time(ky, sy, res, oy, inv_y)
-        else:
-            if tz > t_stop:
-                return count
-            kz += sz
-            tz = event_time(kz, sz, res, oz, inv_z)
+        moved, kx, ky, kz, tx, ty, tz = dda_step(kx, ky, kz, tx, ty, tz, sx, sy, sz, ox, oy, oz,
+                                                 inv_x, inv_y, inv_z, res, t_stop)
+        if not moved:
+            return count
 
 
 @njit(cache=True)

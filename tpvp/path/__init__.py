@@ -12,6 +12,7 @@ from tpvp.path.tsp import (  # noqa: F401
     PathResult,
     TspConfig,
     band_path,
+    nearest_neighbour_path,
     path_length,
     shortest_open_path,
 )

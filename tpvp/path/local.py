@@ -1,4 +1,6 @@
-"""Local path between two camera positions around a spherical obstacle (SPEC.md "Local path").
+"""Local path between two camera positions around a spherical obstacle.
+
+Facts: docs/single_plant.md#local-path.
 
 The obstacle is a sphere of centre O and radius r around the plant. If the segment MN does not
 enter the sphere the path is the segment; otherwise, with P and Q the points where MN enters and
@@ -8,7 +10,7 @@ P and Q (the short arc), and Q -> N straight:
     length = |MP| + r * angle(P - O, Q - O) + |QN|.
 
 (The reference code measures the arc by a parametric angle that can pick the long way round; the
-SPEC formula, the short arc, is used here.) Camera positions inside the obstacle sphere have no
+formula above, the short arc, is used here.) Camera positions inside the obstacle sphere have no
 defined local path and are rejected.
 """
 
@@ -69,7 +71,7 @@ def predicted_size(observed_points, centre, size_factor: float = SIZE_FACTOR) ->
 
 def obstacle_radius(observed_points, centre, size_factor: float = SIZE_FACTOR,
                     radius_factor: float = RADIUS_FACTOR) -> float:
-    """Obstacle sphere radius ``sqrt(2) * predicted_size`` (SPEC.md)."""
+    """Obstacle sphere radius ``sqrt(2) * predicted_size`` (docs/single_plant.md#local-path)."""
     return float(radius_factor * predicted_size(observed_points, centre, size_factor))
 
 

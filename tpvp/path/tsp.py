@@ -17,8 +17,8 @@ sum of ``distance[v_i, v_{i+1}]`` is minimal: a shortest Hamiltonian path, i.e. 
 Distances may be asymmetric: all three methods use ``distance[i, j]`` as the cost of going from i
 to j (the local path lengths of :mod:`tpvp.path.local` are symmetric).
 
-``band_path`` is the greenhouse-row variant (SPEC.md "Path"): views split into an upper and a lower
-height band, an open path in each, joined through a connection view.
+``band_path`` is the greenhouse-row variant (docs/greenhouse.md#band-path): views split into an
+upper and a lower height band, an open path in each, joined through a connection view.
 """
 
 from __future__ import annotations
@@ -30,10 +30,9 @@ import numpy as np
 from numba import njit
 
 from tpvp.errors import ConfigError
-from tpvp.setcover.ilp import cbc_command
+from tpvp.solvers import check_solver_settings, milp_solver
 
 METHODS = ("auto", "dp", "ilp", "heuristic")
-SOLVERS = ("cbc", "highs")
 
 # Largest node count the Held-Karp table may take (2^(n-2) x (n-2) doubles: 170 MB at 22).
 _DP_HARD_LIMIT = 22
@@ -54,16 +53,11 @@ class TspConfig:
     def __post_init__(self):
         if self.method not in METHODS:
             raise ConfigError(f"method must be one of {METHODS}, got {self.method!r}")
-        if self.solver not in SOLVERS:
-            raise ConfigError(f"solver must be one of {SOLVERS}, got {self.solver!r}")
+        check_solver_settings(self.solver, self.time_limit, self.threads)
         if not (isinstance(self.dp_max_nodes, (int, np.integer)) and 1 <= self.dp_max_nodes <= _DP_HARD_LIMIT):
             raise ConfigError(f"dp_max_nodes must be an integer in [1, {_DP_HARD_LIMIT}], got {self.dp_max_nodes!r}")
         if not (isinstance(self.ilp_max_nodes, (int, np.integer)) and self.ilp_max_nodes >= 1):
             raise ConfigError(f"ilp_max_nodes must be an integer >= 1, got {self.ilp_max_nodes!r}")
-        if not (isinstance(self.time_limit, (int, float)) and self.time_limit > 0):
-            raise ConfigError(f"time_limit must be a positive number of seconds, got {self.time_limit!r}")
-        if not (isinstance(self.threads, (int, np.integer)) and self.threads >= 1):
-            raise ConfigError(f"threads must be an integer >= 1, got {self.threads!r}")
         if not (isinstance(self.kicks, (int, np.integer)) and self.kicks >= 0):
             raise ConfigError(f"kicks must be an integer >= 0, got {self.kicks!r}")
 
@@ -215,13 +209,7 @@ def _ilp(d: np.ndarray, start: int, end: int | None, config: TspConfig, deadline
         remaining = deadline - time.perf_counter()
         if remaining <= 0:
             return None
-        if config.solver == "cbc":
-            solver = cbc_command(msg=False, timeLimit=remaining, threads=int(config.threads),
-                                 gapRel=0.0, gapAbs=1e-9)
-        else:
-            solver = pulp.HiGHS(msg=False, timeLimit=remaining, threads=int(config.threads),
-                                gapRel=0.0, gapAbs=1e-9)
-        prob.solve(solver)
+        prob.solve(milp_solver(config.solver, remaining, config.threads, gapRel=0.0, gapAbs=1e-9))
         if prob.sol_status != pulp.LpSolutionOptimal:
             return None
         succ = np.full(n, -1, dtype=np.int64)
@@ -242,6 +230,30 @@ def _ilp(d: np.ndarray, start: int, end: int | None, config: TspConfig, deadline
 
 
 # --- heuristic -------------------------------------------------------------------------------
+
+
+def nearest_neighbour_path(distance, start: int, end: int | None = None) -> np.ndarray:
+    """Greedy open path: from ``start`` always to the nearest unvisited node, ``end`` (if given) last.
+
+    Ties go to the lowest index. The starting point of the ``"heuristic"`` method, which is never
+    longer; useful as a baseline.
+    """
+    d, start, end = _path_problem(distance, start, end)
+    return _nearest_neighbour(d, start, end)
+
+
+def _path_problem(distance, start, end):
+    """Checked ``(distance, start, end)``; ``end == start`` on a one-node problem means no end."""
+    d = _as_distance(distance)
+    n = d.shape[0]
+    start = _as_node(start, n, "start")
+    if end is not None:
+        end = _as_node(end, n, "end")
+        if end == start and n > 1:
+            raise ConfigError(f"end must differ from start ({start}) when there are other nodes")
+        if end == start:
+            end = None
+    return d, start, end
 
 
 def _nearest_neighbour(d: np.ndarray, start: int, end: int | None) -> np.ndarray:
@@ -396,15 +408,8 @@ def shortest_open_path(distance, start: int, end: int | None = None,
     if not isinstance(config, TspConfig):
         raise ConfigError(f"config must be a TspConfig, got {type(config).__name__}")
     t0 = time.perf_counter()
-    d = _as_distance(distance)
+    d, start, end = _path_problem(distance, start, end)
     n = d.shape[0]
-    start = _as_node(start, n, "start")
-    if end is not None:
-        end = _as_node(end, n, "end")
-        if end == start and n > 1:
-            raise ConfigError(f"end must differ from start ({start}) when there are other nodes")
-        if end == start:
-            end = None
     n_inner = n - 1 - (end is not None)
 
     def result(order, optimal, method):

@@ -1,6 +1,6 @@
 """Embedded-deformation non-rigid registration of the previous session P onto the current coarse
 reconstruction Q (paper "Non-Rigid Registration", individual plants; a port of the authors'
-``single_plant/Nonrigid_ICP``, see shared/docs/registration_inflation_reference.md part A).
+``single_plant/Nonrigid_ICP``, see docs/single_plant.md#registration).
 
 Model: nodes g_j (voxel-downsampled P), per node an axis-angle rotation phi_j (R_j = Exp(phi_j),
 Rodrigues) and a translation t_j; every point is blended from its K_a nearest nodes,

@@ -1,4 +1,4 @@
-"""Single-plant scene set-up (SPEC.md "Single plant").
+"""Single-plant scene set-up (docs/single_plant.md#normalisation).
 
 Order matters: scale by the largest bounding-box side of the *unrotated* plant, rotate about +Z,
 then centre on the rotated plant's bounding box (scaling after rotating would change the 45-degree
@@ -33,12 +33,38 @@ class PlantScene:
         """Apply the same scale, rotation and centring to another cloud (e.g. the other session)."""
         return _rotate_z(np.asarray(points, dtype=np.float64) * self.scale, self.rotation_deg) - self.offset
 
+    @property
+    def matrix(self) -> np.ndarray:
+        """The 4x4 map of :meth:`transform`: ``p' = M[:3, :3] p + M[:3, 3]`` (scale included)."""
+        m = np.eye(4)
+        m[:3, :3] = self.scale * _rotate_z(np.eye(3), self.rotation_deg).T
+        m[:3, 3] = -self.offset
+        return m
+
 
 def _rotate_z(points: np.ndarray, degrees: float) -> np.ndarray:
     a = np.deg2rad(degrees)
     c, s = np.cos(a), np.sin(a)
     rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
     return points @ rot.T
+
+
+def up_rotation(up_axis: str = "+z") -> np.ndarray:
+    """Proper rotation taking the scan axis ``up_axis`` (``+z``, ``-y``, ...) to +Z."""
+    axes = {"x": 0, "y": 1, "z": 2}
+    if len(up_axis) != 2 or up_axis[0] not in "+-" or up_axis[1] not in axes:
+        raise ConfigError(f"up axis must be one of +z, -z, +y, -y, +x, -x, got {up_axis!r}")
+    up = np.zeros(3)
+    up[axes[up_axis[1]]] = 1.0 if up_axis[0] == "+" else -1.0
+    z = np.array([0.0, 0.0, 1.0])
+    if up @ z > 0.5:
+        return np.eye(3)
+    if up @ z < -0.5:
+        return np.diag([1.0, -1.0, -1.0])  # half turn about x
+    # Rotate by 90 degrees about the axis up x z (Rodrigues with sin = 1, cos = 0).
+    k = np.cross(up, z)
+    kx = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    return np.eye(3) + kx + kx @ kx
 
 
 def rotate_z(points: np.ndarray, degrees: float) -> np.ndarray:
@@ -81,7 +107,7 @@ def normalise_plant(points, largest_side: float = 0.24, rotation_deg: float = 0.
 def table_slab(plant_points: np.ndarray, size: float = 0.4, resolution: float = 0.002) -> np.ndarray:
     """Voxel centres of a one-voxel-thick square table under the plant (centred at x = y = 0).
 
-    The slab sits at ``z = lowest plant point - resolution`` (SPEC.md).
+    The slab sits at ``z = lowest plant point - resolution`` (docs/single_plant.md#table).
     """
     z = np.asarray(plant_points)[:, 2].min() - resolution
     half = size / 2

@@ -2,9 +2,6 @@
 
 from __future__ import annotations
 
-import gzip
-import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -20,20 +17,10 @@ SAMPLES = {
 
 
 def sample_path(name: str) -> Path:
-    """Path of an uncompressed copy of a bundled sample (unpacked once into a cache folder)."""
+    """Path of a bundled sample (gzip-compressed; :func:`tpvp.io.read_point_cloud` reads it as it is)."""
     if name not in SAMPLES:
         raise ConfigError(f"unknown bundled sample {name!r}; choose one of {', '.join(SAMPLES)}")
-    cache = Path(os.environ.get("TPVP_CACHE", Path(tempfile.gettempdir()) / "tpvp-cache"))
-    target = cache / SAMPLES[name][: -len(".gz")]
-    if not target.is_file():
-        cache.mkdir(parents=True, exist_ok=True)
-        with gzip.open(DATA / SAMPLES[name], "rb") as src:
-            payload = src.read()
-        fd, tmp = tempfile.mkstemp(dir=cache, prefix=target.name, suffix=".part")
-        with os.fdopen(fd, "wb") as out:
-            out.write(payload)
-        os.replace(tmp, target)
-    return target
+    return DATA / SAMPLES[name]
 
 
 def load_sample(name: str) -> np.ndarray:

@@ -13,9 +13,9 @@ import numpy as np
 
 from tpvp.errors import ConfigError, PointCloudError
 
-_BITS = 21
-_OFFSET = 1 << (_BITS - 1)  # keys in [-2^20, 2^20): +-1 km at 1 mm voxels
-_MASK = (1 << _BITS) - 1
+KEY_BITS = 21  # bits per axis in a voxel code
+KEY_OFFSET = 1 << (KEY_BITS - 1)  # encodable keys: [-2^20, 2^20) per axis, +-1 km at 1 mm voxels
+KEY_MASK = (1 << KEY_BITS) - 1
 
 
 def _check_resolution(resolution: float) -> float:
@@ -32,7 +32,7 @@ def voxel_keys(points: np.ndarray, resolution: float) -> np.ndarray:
     if not np.all(np.isfinite(points)):
         raise PointCloudError("cannot voxelise a cloud with NaN or infinite coordinates")
     keys = np.floor(points / resolution).astype(np.int64)
-    if keys.size and (keys.min() < -_OFFSET or keys.max() >= _OFFSET):
+    if keys.size and (keys.min() < -KEY_OFFSET or keys.max() >= KEY_OFFSET):
         raise PointCloudError(
             f"coordinates span {np.ptp(points, axis=0).max():.3g} m, too large for voxels of "
             f"{resolution} m (wrong units?)"
@@ -46,17 +46,38 @@ def key_centres(keys: np.ndarray, resolution: float) -> np.ndarray:
     return (np.asarray(keys, dtype=np.int64).reshape(-1, 3) + 0.5) * resolution
 
 
+def encode_key(kx, ky, kz):
+    """Code of the key ``(kx, ky, kz)``: ``KEY_BITS`` bits per axis, each shifted by
+    ``KEY_OFFSET``; codes sort like the keys (x, then y, then z).
+
+    The one definition of the packing: :func:`encode_keys` applies it to columns, and numba
+    kernels compile it as is (integer arithmetic on module constants only; see
+    :data:`tpvp.sensor.raycast.encode_key_jit`). Keys must lie in ``[-KEY_OFFSET, KEY_OFFSET)``;
+    this scalar form does not check.
+    """
+    return ((kx + KEY_OFFSET) << (2 * KEY_BITS)) | ((ky + KEY_OFFSET) << KEY_BITS) | (kz + KEY_OFFSET)
+
+
 def encode_keys(keys: np.ndarray) -> np.ndarray:
-    """Pack ``(N, 3)`` keys into one sortable ``int64`` code each."""
-    keys = np.asarray(keys, dtype=np.int64).reshape(-1, 3) + _OFFSET
-    return (keys[:, 0] << (2 * _BITS)) | (keys[:, 1] << _BITS) | keys[:, 2]
+    """Pack ``(N, 3)`` keys into one sortable ``int64`` code each (see :func:`encode_key`).
+
+    Raises :class:`PointCloudError` for keys outside ``[-KEY_OFFSET, KEY_OFFSET)``.
+    """
+    keys = np.asarray(keys, dtype=np.int64).reshape(-1, 3)
+    if keys.size and (keys.min() < -KEY_OFFSET or keys.max() >= KEY_OFFSET):
+        raise PointCloudError(
+            f"voxel keys span [{keys.min()}, {keys.max()}], outside the encodable range "
+            f"[{-KEY_OFFSET}, {KEY_OFFSET}) (points too far from the origin for the voxel size?)"
+        )
+    return encode_key(keys[:, 0], keys[:, 1], keys[:, 2])
 
 
 def decode_keys(codes: np.ndarray) -> np.ndarray:
     """Inverse of :func:`encode_keys`."""
     codes = np.asarray(codes, dtype=np.int64).reshape(-1)
-    keys = np.stack([(codes >> (2 * _BITS)) & _MASK, (codes >> _BITS) & _MASK, codes & _MASK], axis=1)
-    return keys - _OFFSET
+    keys = np.stack([(codes >> (2 * KEY_BITS)) & KEY_MASK, (codes >> KEY_BITS) & KEY_MASK,
+                     codes & KEY_MASK], axis=1)
+    return keys - KEY_OFFSET
 
 
 def unique_keys(keys: np.ndarray, return_counts: bool = False):

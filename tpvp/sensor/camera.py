@@ -1,7 +1,7 @@
 """Pinhole camera of the virtual sensor: intrinsics and poses from position + look-at.
 
 The camera frame is OpenCV's: +z along the optical axis, +x to the right of the image, +y down.
-Roll is fixed by the world up vector +Z (SPEC.md): ``x = z x up`` normalised, ``y = z x x``.
+Roll is fixed by the world up vector +Z (docs/sensor.md#look-at-pose): ``x = z x up`` normalised, ``y = z x x``.
 When the optical axis is (anti)parallel to up the cross product vanishes; the world +Y axis then
 stands in for "up" so looking straight down or up still gives a valid rotation.
 """

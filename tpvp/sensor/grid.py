@@ -8,7 +8,7 @@ them in a dense box padded by a few empty voxels:
   255. Every voxel closer than that is empty, which lets a ray jump through empty space without
   changing which voxel it meets first (see :mod:`tpvp.sensor.raycast`);
 * ``countable[id]`` = whether a hit on that voxel counts as an observation. Supporting-table voxels
-  occlude but never count (SPEC.md).
+  occlude but never count (docs/sensor.md#coverage).
 """
 
 from __future__ import annotations

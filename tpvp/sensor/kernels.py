@@ -1,6 +1,6 @@
 """Numba kernels of the two measurement models, one view or many views at once.
 
-* ``reference`` (the authors' simulator, SPEC.md): every occupied voxel whose centre lies in front
+* ``reference`` (the authors' simulator, docs/sensor.md#reference-model): every occupied voxel whose centre lies in front
   of the camera and projects inside the image spawns one ray toward its centre; the first occupied
   voxel along it is observed.
 * ``pixel`` (a real depth camera): one ray per pixel (optional stride). Computed as a z-buffer over

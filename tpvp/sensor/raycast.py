@@ -12,6 +12,11 @@ Skipping is exact: every voxel closer (Chebyshev) than the grid's clearance valu
 ray may jump to a parameter ``t0`` inside that empty cube. The state after the jump is rebuilt from
 the same event times ("all events with ``t < t0`` done"), so the DDA continues along exactly the
 voxels it would have visited without the jump; only empty voxels are skipped.
+
+The stepping is shared with the occupancy map of :mod:`tpvp.nbv.occupancy` (one DDA for both):
+``ray_setup`` (step signs, reciprocals, start voxel), ``slab`` (entry interval of a box),
+``keys_after`` (state after every event before a ray parameter, the exact jump), ``event_times``
+and ``dda_step`` (one step, ties to the lowest axis). They are inlined into the callers' loops.
 """
 
 from __future__ import annotations
@@ -19,7 +24,12 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from tpvp.scene.voxels import encode_key
+
 MISS = -1
+
+# Code of a voxel key (:func:`tpvp.scene.voxels.encode_key`, the same function) inside kernels.
+encode_key_jit = njit(cache=True, inline="always")(encode_key)
 
 
 @njit(cache=True, inline="always")
@@ -33,8 +43,13 @@ def event_time(k, step, res, o, inv):
 
 
 @njit(cache=True)
-def _key_after(o, d, inv, step, k0, t0, res):
-    """Voxel index along one axis once every boundary event with ``t < t0`` has been processed."""
+def key_after(o, d, inv, step, k0, t0, res):
+    """Voxel index along one axis once every boundary event with ``t < t0`` has been processed.
+
+    ``k0`` is the start voxel ``floor(o / res)``; the result is the index that the plain DDA walk
+    from ``k0`` holds after all its events before ``t0`` along this axis (closed-form event times,
+    so it is exact, not a rounding of ``o + t0 d``).
+    """
     if step == 0:
         return k0
     k = np.int64(np.floor((o + t0 * d) / res))
@@ -64,6 +79,80 @@ def _sign(x):
     return 0
 
 
+@njit(cache=True, inline="always")
+def ray_setup(ox, oy, oz, dx, dy, dz, res):
+    """Start of the DDA along ``o + t d``: ``(sx, sy, sz, inv_x, inv_y, inv_z, kx, ky, kz)``.
+
+    Step signs per axis (0 for a zero component), reciprocals ``1 / d`` (0 where ``d = 0``) and
+    the key of the voxel holding the origin.
+    """
+    sx, sy, sz = _sign(dx), _sign(dy), _sign(dz)
+    inv_x = 1.0 / dx if sx != 0 else 0.0
+    inv_y = 1.0 / dy if sy != 0 else 0.0
+    inv_z = 1.0 / dz if sz != 0 else 0.0
+    kx = np.int64(np.floor(ox / res))
+    ky = np.int64(np.floor(oy / res))
+    kz = np.int64(np.floor(oz / res))
+    return sx, sy, sz, inv_x, inv_y, inv_z, kx, ky, kz
+
+
+@njit(cache=True, inline="always")
+def slab(o, d, inv, low, high, parallel_inside):
+    """Ray-parameter interval ``(t_in, t_out)`` inside the slab ``low <= x <= high`` of one axis.
+
+    For ``d = 0`` the ray is either always inside (``parallel_inside``, decided by the caller) or
+    never (an empty interval).
+    """
+    if d > 0.0:
+        return (low - o) * inv, (high - o) * inv
+    if d < 0.0:
+        return (high - o) * inv, (low - o) * inv
+    if parallel_inside:
+        return -np.inf, np.inf
+    return np.inf, -np.inf
+
+
+@njit(cache=True, inline="always")
+def keys_after(ox, oy, oz, dx, dy, dz, inv_x, inv_y, inv_z, sx, sy, sz, kx0, ky0, kz0, t0, res):
+    """Voxel ``(kx, ky, kz)`` of the DDA from ``(kx0, ky0, kz0)`` after every event with ``t < t0``
+    (an exact jump, see :func:`key_after`)."""
+    return (key_after(ox, dx, inv_x, sx, kx0, t0, res),
+            key_after(oy, dy, inv_y, sy, ky0, t0, res),
+            key_after(oz, dz, inv_z, sz, kz0, t0, res))
+
+
+@njit(cache=True, inline="always")
+def event_times(kx, ky, kz, sx, sy, sz, ox, oy, oz, inv_x, inv_y, inv_z, res):
+    """Ray parameters ``(tx, ty, tz)`` at which the ray leaves voxel ``(kx, ky, kz)`` per axis."""
+    return (event_time(kx, sx, res, ox, inv_x), event_time(ky, sy, res, oy, inv_y),
+            event_time(kz, sz, res, oz, inv_z))
+
+
+@njit(cache=True, inline="always")
+def dda_step(kx, ky, kz, tx, ty, tz, sx, sy, sz, ox, oy, oz, inv_x, inv_y, inv_z, res, t_stop):
+    """One DDA step: ``(moved, kx, ky, kz, tx, ty, tz)``.
+
+    Leaves the current voxel along the axis of the earliest event (ties to the lowest axis);
+    ``moved`` is False (state unchanged) when that event lies beyond ``t_stop``.
+    """
+    if tx <= ty and tx <= tz:
+        if tx > t_stop:
+            return False, kx, ky, kz, tx, ty, tz
+        kx += sx
+        tx = event_time(kx, sx, res, ox, inv_x)
+    elif ty <= tz:
+        if ty > t_stop:
+            return False, kx, ky, kz, tx, ty, tz
+        ky += sy
+        ty = event_time(ky, sy, res, oy, inv_y)
+    else:
+        if tz > t_stop:
+            return False, kx, ky, kz, tx, ty, tz
+        kz += sz
+        tz = event_time(kz, sz, res, oz, inv_z)
+    return True, kx, ky, kz, tx, ty, tz
+
+
 @njit(cache=True)
 def cast_ray(ox, oy, oz, dx, dy, dz, index, clearance, lo0, lo1, lo2, res, max_range_sq, t_stop):
     """Id of the first occupied voxel hit by ray ``o + t d`` (within range), else ``MISS``.
@@ -72,46 +161,24 @@ def cast_ray(ox, oy, oz, dx, dy, dz, index, clearance, lo0, lo1, lo2, res, max_r
     the full ray); callers use this when nothing beyond that point can matter.
     """
     n0, n1, n2 = index.shape
-    sx, sy, sz = _sign(dx), _sign(dy), _sign(dz)
-    inv_x = 1.0 / dx if sx != 0 else 0.0
-    inv_y = 1.0 / dy if sy != 0 else 0.0
-    inv_z = 1.0 / dz if sz != 0 else 0.0
-    kx0 = np.int64(np.floor(ox / res))
-    ky0 = np.int64(np.floor(oy / res))
-    kz0 = np.int64(np.floor(oz / res))
+    sx, sy, sz, inv_x, inv_y, inv_z, kx0, ky0, kz0 = ray_setup(ox, oy, oz, dx, dy, dz, res)
     kx, ky, kz = kx0, ky0, kz0
     if not (lo0 <= kx0 < lo0 + n0 and lo1 <= ky0 < lo1 + n1 and lo2 <= kz0 < lo2 + n2):
         # Start where the ray enters the grid box shrunk by half a voxel; the padding voxels
         # around the occupied box are empty, so nothing before that point can be hit.
-        t_enter = 0.0
-        t_exit = np.inf
-        for axis in range(3):
-            if axis == 0:
-                o, d, inv, lo, n = ox, dx, inv_x, lo0, n0
-            elif axis == 1:
-                o, d, inv, lo, n = oy, dy, inv_y, lo1, n1
-            else:
-                o, d, inv, lo, n = oz, dz, inv_z, lo2, n2
-            low = (lo + 0.5) * res
-            high = (lo + n - 0.5) * res
-            if d == 0.0:
-                if o < low or o > high:
-                    return MISS
-            else:
-                t1 = (low - o) * inv
-                t2 = (high - o) * inv
-                if t1 > t2:
-                    t1, t2 = t2, t1
-                t_enter = max(t_enter, t1)
-                t_exit = min(t_exit, t2)
+        low0, high0 = (lo0 + 0.5) * res, (lo0 + n0 - 0.5) * res
+        low1, high1 = (lo1 + 0.5) * res, (lo1 + n1 - 0.5) * res
+        low2, high2 = (lo2 + 0.5) * res, (lo2 + n2 - 0.5) * res
+        a0, b0 = slab(ox, dx, inv_x, low0, high0, low0 <= ox <= high0)
+        a1, b1 = slab(oy, dy, inv_y, low1, high1, low1 <= oy <= high1)
+        a2, b2 = slab(oz, dz, inv_z, low2, high2, low2 <= oz <= high2)
+        t_enter = max(0.0, max(a0, max(a1, a2)))
+        t_exit = min(b0, min(b1, b2))
         if t_enter > t_exit:
             return MISS
-        kx = _key_after(ox, dx, inv_x, sx, kx0, t_enter, res)
-        ky = _key_after(oy, dy, inv_y, sy, ky0, t_enter, res)
-        kz = _key_after(oz, dz, inv_z, sz, kz0, t_enter, res)
-    tx = event_time(kx, sx, res, ox, inv_x)
-    ty = event_time(ky, sy, res, oy, inv_y)
-    tz = event_time(kz, sz, res, oz, inv_z)
+        kx, ky, kz = keys_after(ox, oy, oz, dx, dy, dz, inv_x, inv_y, inv_z, sx, sy, sz,
+                                kx0, ky0, kz0, t_enter, res)
+    tx, ty, tz = event_times(kx, ky, kz, sx, sy, sz, ox, oy, oz, inv_x, inv_y, inv_z, res)
     while True:
         ix, iy, iz = kx - lo0, ky - lo1, kz - lo2
         if ix < 0 or iy < 0 or iz < 0 or ix >= n0 or iy >= n1 or iz >= n2:
@@ -143,25 +210,11 @@ def cast_ray(ox, oy, oz, dx, dy, dz, index, clearance, lo0, lo1, lo2, res, max_r
                 t0 = min(t0, ((kz - m + 1.5) * res - oz) * inv_z)
             if t0 > t_stop:
                 return MISS
-            kx = _key_after(ox, dx, inv_x, sx, kx0, t0, res)
-            ky = _key_after(oy, dy, inv_y, sy, ky0, t0, res)
-            kz = _key_after(oz, dz, inv_z, sz, kz0, t0, res)
-            tx = event_time(kx, sx, res, ox, inv_x)
-            ty = event_time(ky, sy, res, oy, inv_y)
-            tz = event_time(kz, sz, res, oz, inv_z)
+            kx, ky, kz = keys_after(ox, oy, oz, dx, dy, dz, inv_x, inv_y, inv_z, sx, sy, sz,
+                                    kx0, ky0, kz0, t0, res)
+            tx, ty, tz = event_times(kx, ky, kz, sx, sy, sz, ox, oy, oz, inv_x, inv_y, inv_z, res)
             continue
-        if tx <= ty and tx <= tz:
-            if tx > t_stop:
-                return MISS
-            kx += sx
-            tx = event_time(kx, sx, res, ox, inv_x)
-        elif ty <= tz:
-            if ty > t_stop:
-                return MISS
-            ky += sy
-            ty = event_time(ky, sy, res, oy, inv_y)
-        else:
-            if tz > t_stop:
-                return MISS
-            kz += sz
-            tz = event_time(kz, sz, res, oz, inv_z)
+        moved, kx, ky, kz, tx, ty, tz = dda_step(kx, ky, kz, tx, ty, tz, sx, sy, sz, ox, oy, oz,
+                                                 inv_x, inv_y, inv_z, res, t_stop)
+        if not moved:
+            return MISS

@@ -40,7 +40,9 @@ class SensorConfig:
 
 def check_camera(grid: OccupancyGrid, position) -> np.ndarray:
     """Reject cameras placed inside an occupied voxel (the ray caster would see only that voxel)."""
-    position = np.asarray(position, dtype=np.float64).reshape(3)
+    # A writable copy: numba compiles a kernel once per argument type, and read-only arrays (a
+    # view space's positions) are a type of their own.
+    position = np.array(position, dtype=np.float64).reshape(3)
     if not np.all(np.isfinite(position)):
         raise SensorError(f"camera position {position.tolist()} is not finite")
     local = np.floor(position / grid.resolution).astype(np.int64) - grid.origin_key
@@ -76,7 +78,7 @@ def observe(grid: OccupancyGrid, position, look_at, config: SensorConfig = Senso
         first_hit = np.empty(grid.size, dtype=np.int64)
         kernels.reference_view(position, rotation, k.fx, k.fy, k.cx, k.cy, k.width, k.height,
                                ex["centres"], grid.index, grid.clearance, ex["lo"], grid.resolution,
-                               config.max_range**2, ex["countable"], ex["countable_box"], first_hit)
+                               float(config.max_range) ** 2, ex["countable"], ex["countable_box"], first_hit)
         return kernels.countable_hit_ids(first_hit, ex["countable"])
     seen = np.zeros(grid.size, dtype=np.bool_)
     stride = int(config.pixel_stride)
@@ -84,7 +86,7 @@ def observe(grid: OccupancyGrid, position, look_at, config: SensorConfig = Senso
     scratch = _scratch(shape)
     kernels.pixel_view_seen(position, rotation, k.fx, k.fy, k.cx, k.cy, k.width, k.height, stride,
                             ex["keys"], ex["exposed"], grid.resolution, ex["centres"],
-                            config.max_range**2, ex["countable"], seen, *scratch)
+                            float(config.max_range) ** 2, ex["countable"], seen, *scratch)
     return np.flatnonzero(seen)
 
 
@@ -117,7 +119,7 @@ def depth_image(grid: OccupancyGrid, position, look_at, config: SensorConfig = S
                        grid.resolution, 0, 0, depth, hit)
     found = hit >= 0
     offset = ex["centres"][hit[found]] - position
-    too_far = (offset**2).sum(axis=1) > config.max_range**2
+    too_far = (offset**2).sum(axis=1) > float(config.max_range) ** 2
     idx = np.flatnonzero(found.ravel())[too_far]
     hit.ravel()[idx] = -1
     depth.ravel()[idx] = np.inf
@@ -128,7 +130,7 @@ def observe_many(grid: OccupancyGrid, positions, look_ats, config: SensorConfig 
     """Dense boolean matrix ``(views, voxels)``: which countable voxels each view observes (parallel
     over views); :func:`tpvp.visibility.visibility_matrix` gives the sparse form in chunks."""
     positions, rotations = view_poses(grid, positions, look_ats)
-    return _observe_rotated(grid, positions, rotations, config)
+    return observe_poses(grid, positions, rotations, config)
 
 
 def view_poses(grid: OccupancyGrid, positions, look_ats):
@@ -141,20 +143,28 @@ def view_poses(grid: OccupancyGrid, positions, look_ats):
     return positions, (np.stack(rotations) if rotations else np.zeros((0, 3, 3)))
 
 
-def _observe_rotated(grid, positions, rotations, config):
+def observe_poses(grid: OccupancyGrid, positions, rotations,
+                  config: SensorConfig = SensorConfig()) -> np.ndarray:
+    """Dense boolean matrix ``(views, voxels)`` for views given as poses: ``(V, 3)`` positions and
+    their ``(V, 3, 3)`` camera rotations, already checked (as :func:`view_poses` returns them).
+
+    The work behind :func:`observe_many` and :func:`tpvp.visibility.visibility_matrix`.
+    """
     ex = _extras(grid)
     k = config.intrinsics
     seen = np.zeros((len(positions), grid.size), dtype=np.bool_)
     if len(positions) == 0:
         return seen
-    positions = np.ascontiguousarray(positions)
-    rotations = np.ascontiguousarray(rotations)
+    # Writable C-ordered copies: one compiled kernel whatever the caller's arrays (see check_camera).
+    positions = np.array(positions, dtype=np.float64, order="C")
+    rotations = np.array(rotations, dtype=np.float64, order="C")
     if config.model == "reference":
         kernels.reference_views(positions, rotations, k.fx, k.fy, k.cx, k.cy, k.width, k.height,
                                 ex["centres"], grid.index, grid.clearance, ex["lo"], grid.resolution,
-                                config.max_range**2, ex["countable"], ex["countable_box"], seen)
+                                float(config.max_range) ** 2, ex["countable"], ex["countable_box"], seen)
     else:
         kernels.pixel_views(positions, rotations, k.fx, k.fy, k.cx, k.cy, k.width, k.height,
                             int(config.pixel_stride), ex["keys"], ex["exposed"], grid.resolution,
-                            ex["centres"], config.max_range**2, ex["countable"], seen, numba.get_num_threads())
+                            ex["centres"], float(config.max_range) ** 2, ex["countable"], seen,
+                            numba.get_num_threads())
     return seen

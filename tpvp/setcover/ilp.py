@@ -3,9 +3,9 @@
 ``min sum_v x_v  s.t.  sum_v I(p, v) x_v >= 1 for every remaining voxel p,  x_v in {0, 1}``.
 
 Already executed views are excluded from the decision set and the voxels they see are removed
-first (SPEC.md "Set cover"); voxels that no allowed view sees cannot be covered and are dropped
-(counted, not an error). Before solving, the instance is shrunk by exact reductions, each of which
-keeps the optimum value:
+first (docs/single_plant.md#set-cover); voxels that no allowed view sees cannot be covered and are
+dropped (counted, not an error). Before solving, the instance is shrunk by exact reductions, each
+of which keeps the optimum value:
 
 * identical voxel columns (same set of covering views) are merged into one constraint;
 * a voxel whose cover set is a strict superset of another voxel's is dropped (covering the other
@@ -16,6 +16,7 @@ keeps the optimum value:
 
 The reduced ILP is solved with CBC (through PuLP, the default) or HiGHS (through highspy) to proven
 optimality within ``time_limit``; the result reports the objective, a lower bound and the gap.
+Solver names, limits and the CBC command come from :mod:`tpvp.solvers` (shared with the path ILP).
 """
 
 from __future__ import annotations
@@ -32,8 +33,7 @@ import numpy as np
 from scipy import sparse
 
 from tpvp.errors import ConfigError
-
-SOLVERS = ("cbc", "highs")
+from tpvp.solvers import check_solver_settings, highspy_module, milp_solver
 
 # Cap on the entries of one chunk of the (sets x sets) intersection-count product; bounds memory of
 # the dominance test on large instances.
@@ -44,9 +44,9 @@ _PRODUCT_CHUNK_NNZ = 20_000_000
 class SetCoverConfig:
     """Solver settings.
 
-    The reference implementation stops Gurobi after 10 s (SPEC.md); here the default limit is
-    generous so that realistic instances finish with a proof of optimality. Pass
-    ``time_limit=10.0`` to mimic the reference.
+    The reference implementation stops Gurobi after 10 s (docs/single_plant.md#set-cover); here
+    the default limit is generous so that realistic instances finish with a proof of optimality.
+    Pass ``time_limit=10.0`` to mimic the reference.
     """
 
     solver: str = "cbc"  # "cbc" (PuLP's bundled CBC) or "highs" (highspy)
@@ -55,12 +55,7 @@ class SetCoverConfig:
     reduce: bool = True  # apply the exact reductions before solving
 
     def __post_init__(self):
-        if self.solver not in SOLVERS:
-            raise ConfigError(f"solver must be one of {SOLVERS}, got {self.solver!r}")
-        if not (isinstance(self.time_limit, (int, float)) and self.time_limit > 0):
-            raise ConfigError(f"time_limit must be a positive number of seconds, got {self.time_limit!r}")
-        if not (isinstance(self.threads, (int, np.integer)) and self.threads >= 1):
-            raise ConfigError(f"threads must be an integer >= 1, got {self.threads!r}")
+        check_solver_settings(self.solver, self.time_limit, self.threads)
 
 
 @dataclass(frozen=True, eq=False)
@@ -230,24 +225,6 @@ def _reduce(b: sparse.csr_matrix, cols: np.ndarray, enabled: bool):
 # --- solvers ---------------------------------------------------------------------------------
 
 
-def cbc_command(**options):
-    """PuLP's CBC command-line interface, preferring the binary bundled with PuLP.
-
-    ``COIN_CMD`` pointed at the bundled binary is what ``PULP_CBC_CMD`` does, without its PuLP 4
-    deprecation warning; a ``cbc`` on the PATH (``pip install pulp[cbc]``) is the fallback.
-    """
-    import pulp
-    from pulp.apis import coin_api
-
-    bundled = getattr(coin_api.PULP_CBC_CMD, "pulp_cbc_path", None)
-    path = bundled if bundled and os.path.isfile(bundled) and os.access(bundled, os.X_OK) else None
-    solver = pulp.COIN_CMD(path=path, **options)
-    if not solver.available():
-        raise ConfigError("solver 'cbc' is not available: PuLP's bundled CBC is missing and no 'cbc' is on "
-                          "the PATH (pip install 'pulp[cbc]'), or use solver='highs'")
-    return solver
-
-
 def _greedy(b: sparse.csr_matrix) -> np.ndarray:
     """Greedy cover (most new voxels first, lowest index on ties): a feasible fallback."""
     bc = sparse.csc_matrix(b)
@@ -289,8 +266,8 @@ def _solve_cbc(b: sparse.csr_matrix, config: SetCoverConfig):
     try:
         # gapAbs < 1 is an exact stopping rule: the objective is integral, so a gap below 1 proves
         # the incumbent optimal.
-        solver = cbc_command(msg=False, timeLimit=float(config.time_limit), threads=int(config.threads),
-                             gapRel=0.0, gapAbs=0.999, logPath=log_path)
+        solver = milp_solver("cbc", config.time_limit, config.threads, gapRel=0.0, gapAbs=0.999,
+                             logPath=log_path)
         prob.solve(solver)
         with open(log_path, errors="replace") as fh:
             log = _parse_cbc_log(fh.read())
@@ -306,10 +283,7 @@ def _solve_cbc(b: sparse.csr_matrix, config: SetCoverConfig):
 
 
 def _solve_highs(b: sparse.csr_matrix, config: SetCoverConfig):
-    try:
-        import highspy
-    except ImportError as exc:  # pragma: no cover - highspy ships with the project's environment
-        raise ConfigError("solver 'highs' needs the highspy package (pip install highspy)") from exc
+    highspy = highspy_module()
     m, n = b.shape
     a = sparse.csc_matrix(b, dtype=np.float64)
     lp = highspy.HighsLp()

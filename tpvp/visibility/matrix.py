@@ -7,7 +7,7 @@ from scipy import sparse
 from tqdm.auto import tqdm
 
 from tpvp.sensor.grid import OccupancyGrid
-from tpvp.sensor.sensor import SensorConfig, _observe_rotated, view_poses
+from tpvp.sensor.sensor import SensorConfig, observe_poses, view_poses
 
 
 def visibility_matrix(grid: OccupancyGrid, positions, look_ats, config: SensorConfig = SensorConfig(),
@@ -25,7 +25,7 @@ def visibility_matrix(grid: OccupancyGrid, positions, look_ats, config: SensorCo
     starts = range(0, len(positions), chunk_size)
     for start in tqdm(starts, desc="visibility", unit="chunk", disable=not progress):
         stop = start + chunk_size
-        seen = _observe_rotated(grid, positions[start:stop], rotations[start:stop], config)
+        seen = observe_poses(grid, positions[start:stop], rotations[start:stop], config)
         blocks.append(sparse.csr_matrix(seen))
     if not blocks:
         return sparse.csr_matrix((0, grid.size), dtype=bool)

@@ -1,4 +1,4 @@
-"""Greenhouse-row oracle visible set (SPEC.md "Greenhouse oracle").
+"""Greenhouse-row oracle visible set (docs/greenhouse.md#oracle).
 
 Look-at is free in rows, so the oracle ignores the field of view: a ground-truth voxel is visible if,
 from some point of the view box discretised on a 0.1 m grid and within 2 m, the ray toward the

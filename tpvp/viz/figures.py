@@ -10,6 +10,7 @@ matplotlib.use("Agg")  # headless: figures are only ever written to files
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from tpvp.errors import ConfigError  # noqa: E402
 from tpvp.io.atomic import atomic_path  # noqa: E402
 
 _MAX_POINTS = 30000  # matplotlib 3D scatter gets slow beyond this; subsample deterministically
@@ -41,14 +42,42 @@ def _save(fig, path) -> Path:
     return path
 
 
-def plot_plan(path, plant_points, candidates, executed, selected, path_polyline, title="") -> Path:
+def _sphere_wireframe(ax, centre, radius, **style):
+    u = np.linspace(0.0, 2.0 * np.pi, 25)
+    v = np.linspace(0.0, np.pi, 13)
+    x = centre[0] + radius * np.outer(np.cos(u), np.sin(v))
+    y = centre[1] + radius * np.outer(np.sin(u), np.sin(v))
+    z = centre[2] + radius * np.outer(np.ones_like(u), np.cos(v))
+    return ax.plot_wireframe(x, y, z, **style)
+
+
+def plot_plan(path, plant_points, candidates, executed, selected, path_polyline, title="", *,
+              obstacle=None, table_points=None) -> Path:
     """Plant, candidate views (grey), executed warm-up views (black), selected views (numbered in
-    execution order) and the global path (purple)."""
+    execution order) and the global path (purple).
+
+    ``obstacle=(centre, radius)`` adds the obstacle sphere the path goes around (wireframe, radius
+    in the legend); ``table_points`` ((M, 3), e.g. the table voxel centres) adds the supporting
+    table (light brown). Both default to None (not drawn).
+    """
     fig = plt.figure(figsize=(7, 6))
     ax = fig.add_subplot(projection="3d")
+    extent = [np.asarray(candidates, dtype=np.float64).reshape(-1, 3)]
+    if table_points is not None and len(np.asarray(table_points).reshape(-1, 3)):
+        (table,) = _subsample(np.asarray(table_points, dtype=np.float64).reshape(-1, 3), limit=4000)
+        ax.scatter(*table.T, s=2, c="sienna", alpha=0.35, linewidths=0, label="table")
+        extent.append(table)
     (plant,) = _subsample(plant_points)
     ax.scatter(*plant.T, s=0.3, c=plant[:, 2], cmap="viridis", alpha=0.5, linewidths=0)
-    candidates = np.asarray(candidates).reshape(-1, 3)
+    if obstacle is not None:
+        centre, radius = obstacle
+        centre = np.asarray(centre, dtype=np.float64).reshape(3)
+        radius = float(radius)
+        _sphere_wireframe(ax, centre, radius, color="tab:orange", lw=0.4, alpha=0.45,
+                          label=f"obstacle sphere (r = {radius:.3f} m)")
+        ax.scatter(*centre, s=25, c="tab:orange", marker="+")
+        extent.append(np.array([centre - radius, centre + radius]))
+    candidates = extent[0]
     ax.scatter(*candidates.T, s=8, c="lightgrey", label="candidate views")
     executed = np.asarray(executed).reshape(-1, 3)
     ax.scatter(*executed.T, s=40, c="black", marker="s", label="warm-up views")
@@ -59,29 +88,102 @@ def plot_plan(path, plant_points, candidates, executed, selected, path_polyline,
     polyline = np.asarray(path_polyline).reshape(-1, 3)
     if len(polyline):
         ax.plot(*polyline.T, c="purple", lw=1.5, label="global path")
-    _equal_axes(ax, np.concatenate([candidates, plant]))
-    ax.legend(loc="upper left", fontsize=7)
+    _equal_axes(ax, np.concatenate([*extent, plant]))
+    legend = ax.legend(loc="upper left", fontsize=7)
+    for handle in legend.legend_handles:
+        handle.set_alpha(1.0)
     ax.set_title(title, fontsize=9)
     return _save(fig, path)
 
 
+#: Views of the coverage figure: (elevation, azimuth, panel title).
+_COVERAGE_VIEWS = ((25, -60, "from above"), (5, 30, "side"), (-55, 120, "from below"))
+
+
 def plot_coverage(path, voxel_centres, covered, observable, title="") -> Path:
-    """Ground-truth voxels: covered (blue), observable but missed (red), never observable (grey)."""
-    voxel_centres, covered, observable = _subsample(voxel_centres, covered, observable)
-    fig = plt.figure(figsize=(11, 5))
-    for k, (elev, azim) in enumerate(((20, -60), (-25, 120))):
-        ax = fig.add_subplot(1, 2, k + 1, projection="3d")
-        for mask, colour, label in ((~observable, "lightgrey", "not observable"),
-                                    (covered & observable, "tab:blue", "covered"),
-                                    (~covered & observable, "tab:red", "missed")):
-            if mask.any():
-                ax.scatter(*voxel_centres[mask].T, s=1.5 if colour != "tab:red" else 4, c=colour,
-                           label=f"{label} ({mask.sum()})", linewidths=0)
-        _equal_axes(ax, voxel_centres)
+    """Ground-truth voxels: covered (blue), observable but missed (red), never observable (grey).
+
+    Three panels (from above, side, from below). Missed and never-observable voxels are drawn
+    larger and on top of the covered ones (they are the point of the figure, and few); only the
+    covered ones are subsampled for speed. Counts are in the legend and the title.
+    """
+    voxel_centres = np.asarray(voxel_centres, dtype=np.float64).reshape(-1, 3)
+    covered = np.asarray(covered, dtype=bool).reshape(-1)
+    observable = np.asarray(observable, dtype=bool).reshape(-1)
+    hit = covered & observable
+    missed = ~covered & observable
+    never = ~observable
+    n_hit, n_missed, n_never = int(hit.sum()), int(missed.sum()), int(never.sum())
+    (blue,) = _subsample(voxel_centres[hit])
+    (grey,) = _subsample(voxel_centres[never], limit=_MAX_POINTS // 3)
+    (red,) = _subsample(voxel_centres[missed], limit=_MAX_POINTS // 3)
+    layers = (  # drawn in this order, later on top
+        (blue, dict(s=1.5, c="tab:blue", alpha=0.45, linewidths=0), f"covered ({n_hit})"),
+        (grey, dict(s=3, c="0.3", alpha=0.55, linewidths=0), f"never observable ({n_never})"),
+        (red, dict(s=16, c="red", edgecolors="darkred", linewidths=0.4), f"missed ({n_missed})"),
+    )
+    fig = plt.figure(figsize=(15, 5.2))
+    for k, (elev, azim, name) in enumerate(_COVERAGE_VIEWS):
+        ax = fig.add_subplot(1, len(_COVERAGE_VIEWS), k + 1, projection="3d")
+        ax.computed_zorder = False  # keep the drawing order: mpl would sort whole layers by depth
+        for z, (points, style, label) in enumerate(layers):
+            if len(points):
+                ax.scatter(*points.T, depthshade=False, zorder=z + 1, label=label, **style)
+            elif k == 0:  # keep the count in the legend even when there is nothing to draw
+                ax.scatter([], [], [], label=label, **style)
+        if len(voxel_centres):
+            _equal_axes(ax, voxel_centres)
         ax.view_init(elev=elev, azim=azim)
+        ax.set_box_aspect((1, 1, 1), zoom=1.1)
+        # Panel name under the panel: a title would collide with the axes of the view from below.
+        ax.text2D(0.5, -0.1, f"{name} (elevation {elev:+d} deg)", transform=ax.transAxes,
+                  ha="center", va="top", fontsize=8, fontweight="bold")
+        ax.tick_params(labelsize=6)
         if k == 0:
-            ax.legend(loc="upper left", fontsize=7, markerscale=4)
-    fig.suptitle(title, fontsize=10)
+            legend = ax.legend(loc="upper left", fontsize=7, markerscale=2)
+            for handle in legend.legend_handles:
+                handle.set_alpha(1.0)
+    n_obs = n_hit + n_missed
+    share = f"{100 * n_hit / n_obs:.2f} %" if n_obs else "n/a"
+    counts = (f"covered {n_hit} of {n_obs} observable voxels ({share}), missed {n_missed} (red), "
+              f"never observable {n_never} (grey)")
+    fig.suptitle(f"{title}\n{counts}" if title else counts, fontsize=10)
+    return _save(fig, path)
+
+
+def plot_depth_images(path, depths, labels, title="", *, cmap="viridis") -> Path:
+    """Depth images side by side (at most 3 per row), colour-mapped in metres with one shared
+    colour bar; pixels without a surface (``inf`` / NaN) are white. ``labels``: one per image."""
+    depths = [np.asarray(d, dtype=np.float64) for d in depths]
+    if not depths:
+        raise ConfigError("no depth images to plot")
+    finite = np.concatenate([d[np.isfinite(d)] for d in depths])
+    lo, hi = (float(finite.min()), float(finite.max())) if len(finite) else (0.0, 1.0)
+    if hi <= lo:
+        hi = lo + 1e-3
+    ncol = min(3, len(depths))
+    nrow = -(-len(depths) // ncol)
+    h, w = depths[0].shape
+    fig, axes = plt.subplots(nrow, ncol, figsize=(4.2 * ncol + 1.0, nrow * (4.2 * h / w + 0.45) + 0.5),
+                             squeeze=False, layout="constrained")
+    colours = plt.get_cmap(cmap).with_extremes(bad="white")
+    image = None
+    for ax, depth, label in zip(axes.flat, depths, labels):
+        image = ax.imshow(np.ma.masked_invalid(depth), cmap=colours, vmin=lo, vmax=hi,
+                          interpolation="nearest")
+        seen = np.isfinite(depth)
+        ax.set_title(f"{label}: {100 * seen.mean():.1f} % of pixels hit", fontsize=8)
+        ax.set_xticks([])
+        ax.set_yticks([])
+        for side in ax.spines.values():
+            side.set_color("0.6")
+    for ax in axes.flat[len(depths):]:
+        ax.set_visible(False)
+    bar = fig.colorbar(image, ax=axes.ravel().tolist(), shrink=0.9, aspect=30)
+    bar.set_label("depth (m, along the camera axis)", fontsize=8)
+    bar.ax.tick_params(labelsize=7)
+    if title:
+        fig.suptitle(title, fontsize=10)
     return _save(fig, path)
 
 

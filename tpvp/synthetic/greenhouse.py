@@ -708,7 +708,7 @@ def save_row_sessions(sessions, folder) -> Path:
         "point_counts": [s.n_points for s in sessions],
         "seed": first.seed,
         "point_spacing": first.point_spacing,
-        "generator": "tpvp.scene.greenhouse",
+        "generator": "tpvp.synthetic.greenhouse",
         "generator_version": GENERATOR_VERSION,
         "units": "m",
         "frame": f"{first.room} world frame (plant box of the bundled configuration)",

@@ -17,9 +17,10 @@ material samples ``(s, t)`` of every organ at two ages, so the ground-truth corr
 and the deformation is smooth and non-rigid; leaves that emerge in between have no correspondence.
 
 Units: metres in a plant-local frame (stem base at the origin, +Z up) at the real scale of the
-Pheno4D seedlings (tomato ~5 cm across, maize ~9 cm tall); callers rescale (SPEC: largest side
-0.24 m). Samples are stratified (a jittered grid, one row per ``spacing`` of arc length, as many
-samples across a row as its width needs), so the density is uniform per area and a 2 mm voxel grid
+Pheno4D seedlings (tomato ~5 cm across, maize ~9 cm tall); callers rescale (largest side 0.24 m,
+docs/single_plant.md#normalisation). Samples are stratified (a jittered grid, one row per
+``spacing`` of arc length, as many samples across a row as its width needs), so the density is
+uniform per area and a 2 mm voxel grid
 at the normalised scale sees a closed sheet. Deterministic: the plant is a function of
 ``(species, seed, stage, params)``.
 """
@@ -779,7 +780,7 @@ def save_session_pair(pair: SessionPair, folder, name: str | None = None) -> Pat
         "files": {**files, "correspondences": corr_path.name},
         "points": {"previous": len(pair.previous), "current": len(pair.current)},
         "leaves": {"previous": pair.previous.leaf_count, "current": pair.current.leaf_count},
-        "new_organs": list(pair.new_organs), "generator": "tpvp.scene.plants",
+        "new_organs": list(pair.new_organs), "generator": "tpvp.synthetic.plants",
     }
     manifest_path = folder / f"{name}_manifest.json"
     atomic_write_text(manifest_path, json.dumps(manifest, indent=2) + "\n")

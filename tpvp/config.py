@@ -1,0 +1,432 @@
+"""One configuration per setting: every stage's parameters, the paper's values as defaults.
+
+:class:`PlantConfig` (individual plants) and :class:`RowConfig` (greenhouse rows) nest the stages'
+own frozen dataclasses. Resolutions that the authors' YAML derives from the ground-truth resolution
+are derived here the same way, in one place (:data:`DERIVED`, documented in
+``docs/configuration.md``): a derived key that the user does not set follows ``gt_resolution``; a
+key the user sets wins. Build configurations with :func:`make_config` (Python keywords or dotted
+``key=value`` overrides) or :func:`load_config` (a YAML file or a named configuration); write the
+resolved configuration with :func:`config_yaml` so any result can be re-run exactly.
+
+The named configuration ``paper`` (and ``paper-row``) is the one behind every reproduced table;
+new methods are added beside it and chosen by name, never swapped into it silently.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import types
+import typing
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from tpvp.errors import ConfigError, InputFileError
+from tpvp.inflation import InflationConfig
+from tpvp.nbv import OccupancyMapConfig
+from tpvp.path.tsp import TspConfig
+from tpvp.registration import EDConfig
+from tpvp.sensor.sensor import SensorConfig
+from tpvp.setcover import SetCoverConfig
+
+SCALES = ("normalised", "native")
+UP_AXES = ("+z", "-z", "+y", "-y", "+x", "-x")
+
+
+@dataclass(frozen=True)
+class SceneConfig:
+    """How a scan becomes the simulator's scene (docs/single_plant.md#normalisation).
+
+    scale: ``normalised`` (the paper's protocol: the plant scaled to ``largest_side``) or
+    ``native`` (the plant keeps its size; ``radius`` is the view-sphere radius in the scan's metres
+    and every resolution scales with the plant, see docs/configuration.md#native-scale).
+    radius: view-sphere radius; None keeps the view space's own (0.4 m) in normalised mode and means
+    0.4 m around the real plant in native mode. table: None = the view space's choice.
+    up_axis: the scan axis that points up; the plant is turned so that it becomes +Z.
+    """
+
+    largest_side: float = 0.24
+    rotation_deg: float = 0.0
+    centre: str = "bbox"
+    table: bool | None = None
+    table_size: float = 0.4
+    table_resolution: float = 0.002
+    scale: str = "normalised"
+    radius: float | None = None
+    up_axis: str = "+z"
+
+    def __post_init__(self):
+        _positive(self, "largest_side", "table_size", "table_resolution")
+        if self.radius is not None:
+            _positive(self, "radius")
+        if self.centre not in ("bbox", "centroid"):
+            raise ConfigError(f"scene.centre must be 'bbox' or 'centroid', got {self.centre!r}")
+        if self.scale not in SCALES:
+            raise ConfigError(f"scene.scale must be one of {', '.join(SCALES)}, got {self.scale!r}")
+        if self.up_axis not in UP_AXES:
+            raise ConfigError(f"scene.up_axis must be one of {', '.join(UP_AXES)}, got {self.up_axis!r}")
+
+
+@dataclass(frozen=True)
+class NbvConfig:
+    """The warm-up next-best view. method: a name of :data:`tpvp.nbv.NBV_METHODS`.
+    warm_up_views: NBVs after the initial view (the paper: 1). pixel_stride: information-gain rays
+    every n-th pixel in u and v (4 for plants, 20 for rows). map: the occupancy map of what was
+    observed (voxel = 2 x predicted size / map.voxels_across)."""
+
+    method: str = "geometric"
+    warm_up_views: int = 1
+    pixel_stride: int = 4
+    map: OccupancyMapConfig = field(default_factory=OccupancyMapConfig)
+
+    def __post_init__(self):
+        _integer(self, "warm_up_views", minimum=0)
+        _integer(self, "pixel_stride", minimum=1)
+
+
+@dataclass(frozen=True)
+class RegistrationConfig:
+    """Alignment of the previous session onto the coarse reconstruction. method: a name of
+    :data:`tpvp.registration.REGISTRATION_METHODS`; each method reads its own section."""
+
+    method: str = "embedded-deformation"
+    embedded_deformation: EDConfig = field(default_factory=EDConfig)
+
+
+@dataclass(frozen=True)
+class SelectionConfig:
+    """View selection on the planning surface. method: a name of
+    :data:`tpvp.setcover.SELECTION_METHODS`. cover_resolution: voxel of the planning surface (m).
+    coverage_target: fraction of the planning surface the selected views must see (1.0 = the
+    paper's full set cover)."""
+
+    method: str = "set-cover"
+    cover_resolution: float = 0.004
+    coverage_target: float = 1.0
+    set_cover: SetCoverConfig = field(default_factory=SetCoverConfig)
+
+    def __post_init__(self):
+        _positive(self, "cover_resolution")
+        if not (isinstance(self.coverage_target, (int, float)) and 0 < self.coverage_target <= 1):
+            raise ConfigError(f"selection.coverage_target must be in (0, 1], got {self.coverage_target!r}")
+
+
+@dataclass(frozen=True)
+class PlantConfig:
+    """Individual-plant setting (the paper's Tables I-IV); defaults = the ``paper`` configuration.
+
+    gt_resolution: ground-truth voxel (m); derived resolutions follow it (docs/configuration.md).
+    initial_view: an index of the view space or one of its named initial views.
+    seed: the run's random seed (registration subsets).
+    """
+
+    name: str = "paper"
+    seed: int = 0
+    gt_resolution: float = 0.002
+    view_space: str = "hemisphere"
+    initial_view: int | str = 17
+    scene: SceneConfig = field(default_factory=SceneConfig)
+    sensor: SensorConfig = field(default_factory=SensorConfig)
+    nbv: NbvConfig = field(default_factory=NbvConfig)
+    registration: RegistrationConfig = field(default_factory=RegistrationConfig)
+    inflation: InflationConfig = field(default_factory=InflationConfig)
+    selection: SelectionConfig = field(default_factory=SelectionConfig)
+    path: TspConfig = field(default_factory=TspConfig)
+
+    setting = "plant"
+
+    def __post_init__(self):
+        _positive(self, "gt_resolution")
+        _integer(self, "seed", minimum=0)
+        if not isinstance(self.initial_view, (int, str)) or isinstance(self.initial_view, bool):
+            raise ConfigError(f"initial_view must be a view index or a named initial view, got {self.initial_view!r}")
+
+    @property
+    def uses_table(self) -> bool:
+        """Whether the scene has a table: ``scene.table`` if set, else the view space's choice."""
+        if self.scene.table is not None:
+            return bool(self.scene.table)
+        from tpvp.viewspace import get_view_space
+
+        return get_view_space(self.view_space).table
+
+
+@dataclass(frozen=True)
+class RowTargetsConfig:
+    """Look-at targets of the greenhouse planner: ``count`` by farthest-point sampling, then each
+    target takes its nearest unused candidate position, ``rounds`` times (docs/greenhouse.md)."""
+
+    count: int = 100
+    rounds: int = 8
+
+    def __post_init__(self):
+        _integer(self, "count", minimum=1)
+        _integer(self, "rounds", minimum=1)
+
+
+@dataclass(frozen=True)
+class RowConfig:
+    """Greenhouse-row setting (the paper's Tables V-VII); defaults = the ``paper-row`` configuration.
+
+    oracle_grid: spacing of the view-box grid of the FOV-free oracle (10 x gt_resolution).
+    The registration section holds the row's control-node spacing (0.15 m, not derived).
+    """
+
+    name: str = "paper-row"
+    seed: int = 0
+    gt_resolution: float = 0.01
+    view_space: str = "room1"
+    oracle_grid: float = 0.1
+    sensor: SensorConfig = field(default_factory=lambda: SensorConfig(max_range=2.0))
+    nbv: NbvConfig = field(default_factory=lambda: NbvConfig(pixel_stride=20))
+    registration: RegistrationConfig = field(
+        default_factory=lambda: RegistrationConfig(embedded_deformation=EDConfig(node_coverage=0.15)))
+    inflation: InflationConfig = field(default_factory=lambda: InflationConfig(0.01, 0.01, 0.01))
+    selection: SelectionConfig = field(default_factory=lambda: SelectionConfig(cover_resolution=0.04))
+    targets: RowTargetsConfig = field(default_factory=RowTargetsConfig)
+    path: TspConfig = field(default_factory=TspConfig)
+
+    setting = "row"
+
+    def __post_init__(self):
+        _positive(self, "gt_resolution", "oracle_grid")
+        _integer(self, "seed", minimum=0)
+
+
+SETTINGS = {"plant": PlantConfig, "row": RowConfig}
+NAMED = {"paper": ("plant", {}), "paper-row": ("row", {})}
+
+# Derived parameters: key -> (rule in words, function of the raw settings). A key the user sets
+# explicitly wins over its rule. docs/configuration.md has the same table with the authors' names.
+DERIVED = {
+    "plant": {
+        "scene.table_resolution": ("1 x gt_resolution", lambda c: c["gt_resolution"]),
+        "registration.embedded_deformation.node_coverage": ("2 x gt_resolution (nricp_resolution_factor)",
+                                                            lambda c: 2 * c["gt_resolution"]),
+        "registration.embedded_deformation.seed": ("seed", lambda c: c["seed"]),
+        "inflation.step": ("2 x gt_resolution (inflation_resolution_factor)", lambda c: 2 * c["gt_resolution"]),
+        "inflation.gamma_near": ("1.5 x gt_resolution (near_current_inflation_distance_factor)",
+                                 lambda c: 1.5 * c["gt_resolution"]),
+        "inflation.gamma_far": ("2.5 x gt_resolution (far_history_inflation_distance_factor)",
+                                lambda c: 2.5 * c["gt_resolution"]),
+        "selection.cover_resolution": ("2 x gt_resolution (history_resolution_factor)",
+                                       lambda c: 2 * c["gt_resolution"]),
+        "sensor.max_range": ("the view space's range (1.0 m plants)", lambda c: _view_space_range(c["view_space"])),
+    },
+    "row": {
+        "oracle_grid": ("10 x gt_resolution", lambda c: 10 * c["gt_resolution"]),
+        "registration.embedded_deformation.seed": ("seed", lambda c: c["seed"]),
+        "inflation.step": ("1 x gt_resolution (voxel of the morphology)", lambda c: c["gt_resolution"]),
+        "inflation.gamma_near": ("1 x gt_resolution", lambda c: c["gt_resolution"]),
+        "inflation.gamma_far": ("1 x gt_resolution", lambda c: c["gt_resolution"]),
+        "selection.cover_resolution": ("4 x gt_resolution (history_resolution_factor)",
+                                       lambda c: 4 * c["gt_resolution"]),
+        "sensor.max_range": ("the view space's range (2.0 m rows)", lambda c: _view_space_range(c["view_space"])),
+    },
+}
+
+
+def _view_space_range(spec) -> float:
+    from tpvp.viewspace import get_view_space
+
+    if not isinstance(spec, str):
+        raise ConfigError(f"configuration key 'view_space': expected a name or a file path, got {spec!r}")
+    try:
+        return float(get_view_space(spec).max_range)
+    except (ConfigError, InputFileError) as exc:
+        raise ConfigError(f"configuration key 'view_space': {exc}") from None
+
+
+def _positive(obj, *names):
+    for name in names:
+        v = getattr(obj, name)
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not (v > 0 and v < float("inf")):
+            raise ConfigError(f"{name} must be a positive number, got {v!r}")
+
+
+def _integer(obj, name, minimum):
+    v = getattr(obj, name)
+    if isinstance(v, bool) or not isinstance(v, int) or v < minimum:
+        raise ConfigError(f"{name} must be an integer >= {minimum}, got {v!r}")
+
+
+# --------------------------------------------------------------------------------------------------
+# dataclass <-> nested dict
+# --------------------------------------------------------------------------------------------------
+
+
+def to_dict(config) -> dict:
+    """Nested plain dict of a configuration (every value explicit)."""
+    out = {}
+    for f in dataclasses.fields(config):
+        value = getattr(config, f.name)
+        out[f.name] = to_dict(value) if dataclasses.is_dataclass(value) else value
+    return out
+
+
+def flatten_keys(tree: dict, prefix: str = "") -> dict:
+    flat = {}
+    for key, value in tree.items():
+        if isinstance(value, dict):
+            flat.update(flatten_keys(value, f"{prefix}{key}."))
+        else:
+            flat[f"{prefix}{key}"] = value
+    return flat
+
+
+def _coerce(key: str, value, hint):
+    """``value`` checked against the field's type hint (int -> float allowed, ``X | None``)."""
+    options = typing.get_args(hint) if typing.get_origin(hint) in (typing.Union, types.UnionType) else (hint,)
+    for option in options:
+        if option is type(None) and value is None:
+            return None
+        if option is bool and isinstance(value, bool):
+            return value
+        if option is int and isinstance(value, int) and not isinstance(value, bool):
+            return value
+        if option is float and isinstance(value, (int, float)) and not isinstance(value, bool):
+            return float(value)
+        if option is str and isinstance(value, str):
+            return value
+    words = {bool: "true or false", int: "an integer", float: "a number", str: "a string", type(None): "null"}
+    expected = " or ".join(words.get(o, getattr(o, "__name__", str(o))) for o in options)
+    raise ConfigError(f"configuration key {key!r}: expected {expected}, got {value!r}")
+
+
+def _build(cls, values: dict, prefix: str, defaults):
+    """Construct ``cls`` from a flat dict of dotted keys below ``prefix`` over ``defaults``."""
+    kwargs = {}
+    hints = typing.get_type_hints(cls)
+    for f in dataclasses.fields(cls):
+        key = f"{prefix}{f.name}"
+        default = getattr(defaults, f.name)
+        if dataclasses.is_dataclass(default):
+            kwargs[f.name] = _build(type(default), values, f"{key}.", default)
+        else:
+            kwargs[f.name] = _coerce(key, values[key], hints[f.name]) if key in values else default
+    try:
+        return cls(**kwargs)
+    except ConfigError as exc:
+        where = prefix.rstrip(".") or "configuration"
+        raise ConfigError(f"{where}: {exc}") from None
+
+
+def _known_keys(cls) -> set:
+    return set(flatten_keys(to_dict(cls())))
+
+
+def make_config(setting: str = "plant", overrides: dict | None = None, **keywords):
+    """A resolved configuration of ``setting`` (``plant`` or ``row``) with dotted-key ``overrides``
+    (``{"registration.embedded_deformation.iterations": 100}``) and top-level ``keywords``
+    (``gt_resolution=0.001``). Derived keys not given follow their rule (:data:`DERIVED`); unknown
+    keys and bad values are one :class:`ConfigError` line naming the key."""
+    if setting not in SETTINGS:
+        raise ConfigError(f"unknown setting {setting!r}; choose one of {', '.join(SETTINGS)}")
+    cls = SETTINGS[setting]
+    given = dict(overrides or {})
+    for key, value in keywords.items():
+        if dataclasses.is_dataclass(value):
+            given.update({f"{key}.{k}": v for k, v in flatten_keys(to_dict(value)).items()})
+        else:
+            given[key] = value
+    given.pop("setting", None)
+    known = _known_keys(cls)
+    for key in given:
+        if key not in known:
+            close = sorted(k for k in known if k.split(".")[-1] == key.split(".")[-1])
+            hint = f" (did you mean {', '.join(close)}?)" if close else ""
+            raise ConfigError(f"unknown configuration key {key!r} for the {setting} setting{hint}")
+    base = to_dict(cls())
+    raw = {**flatten_keys(base), **given}
+    for key, (_, rule) in DERIVED[setting].items():
+        if key not in given:
+            raw[key] = rule(raw)
+    config = _build(cls, raw, "", cls())
+    _check_methods(config)
+    return config
+
+
+def _check_methods(config) -> None:
+    """Method names must be registered (the registries import their packages lazily)."""
+    from tpvp.nbv.methods import NBV_METHODS
+    from tpvp.registration.methods import REGISTRATION_METHODS
+    from tpvp.setcover.methods import SELECTION_METHODS
+
+    for registry, name, key in ((NBV_METHODS, config.nbv.method, "nbv.method"),
+                                (REGISTRATION_METHODS, config.registration.method, "registration.method"),
+                                (SELECTION_METHODS, config.selection.method, "selection.method")):
+        if name not in registry:
+            raise ConfigError(f"configuration key {key!r}: unknown {registry.kind} {name!r}; "
+                              f"choose one of {', '.join(registry.names())}")
+    _view_space_range(config.view_space)
+
+
+def parse_overrides(items) -> dict:
+    """``["a.b=1", "c=true"]`` -> ``{"a.b": 1, "c": True}`` (values read as YAML scalars)."""
+    import yaml
+
+    out = {}
+    for item in items or ():
+        key, sep, text = str(item).partition("=")
+        if not sep or not key.strip():
+            raise ConfigError(f"--set {item!r}: write key=value, e.g. --set registration.embedded_deformation.iterations=100")
+        try:
+            value = yaml.safe_load(text) if text.strip() else None
+        except yaml.YAMLError:
+            value = text
+        if isinstance(value, (dict, list)):
+            raise ConfigError(f"--set {item!r}: the value must be a single number, word or true/false")
+        out[key.strip()] = value
+    return out
+
+
+def load_config(source: str | Path | None = "paper", overrides: dict | None = None):
+    """A named configuration (``paper``, ``paper-row``) or a YAML file, plus dotted ``overrides``.
+
+    The file may give ``setting: plant|row`` and ``base: paper`` and any keys, nested or dotted.
+    A resolved file written by :func:`config_yaml` loads back to the same configuration.
+    """
+    import yaml
+
+    source = "paper" if source is None else source
+    if str(source) in NAMED:
+        setting, values = NAMED[str(source)]
+        values = {**values, "name": str(source)}
+    else:
+        path = Path(source)
+        if not path.is_file():
+            raise InputFileError(f"configuration {str(source)!r} is neither one of {', '.join(NAMED)} nor an existing file")
+        try:
+            tree = yaml.safe_load(path.read_text())
+        except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
+            first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+            raise InputFileError(f"{path}: not a readable YAML configuration ({first})") from None
+        tree = {} if tree is None else tree
+        if not isinstance(tree, dict):
+            raise InputFileError(f"{path}: a configuration must be a mapping of keys to values")
+        tree.pop("provenance", None)
+        base = tree.pop("base", None)
+        setting = tree.pop("setting", None)
+        if base is not None:
+            if base not in NAMED:
+                raise ConfigError(f"{path}: base {base!r} is not one of {', '.join(NAMED)}")
+            base_setting, base_values = NAMED[base]
+            setting = setting or base_setting
+            values = {**base_values, **flatten_keys(tree)}
+        else:
+            values = flatten_keys(tree)
+        setting = setting or "plant"
+    return make_config(setting, {**values, **(overrides or {})})
+
+
+def config_yaml(config, header: str = "") -> str:
+    """The fully resolved configuration as YAML (loads back with :func:`load_config`)."""
+    import yaml
+
+    tree = {"setting": config.setting, **to_dict(config)}
+    lines = [f"# {line}" for line in header.splitlines()] if header else []
+    return "\n".join(lines + [yaml.safe_dump(tree, sort_keys=False, default_flow_style=False)])
+
+
+def derived_table(setting: str = "plant") -> list[tuple[str, str]]:
+    """``(key, rule)`` of every derived parameter of ``setting``."""
+    return [(key, rule) for key, (rule, _) in DERIVED[setting].items()]

@@ -1,0 +1,98 @@
+"""What one single-plant run leaves for a person and a robot: results, the plan in the scan's own
+frame and in the planning frame, the resolved configuration with its provenance, figures and a
+rerun recording."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from tpvp.config import config_yaml
+from tpvp.io import atomic_write_text
+from tpvp.io.plan import plan_table, write_plan
+from tpvp.path.local import local_path_points
+from tpvp.provenance import provenance
+from tpvp.sensor.camera import look_at_rotations, rotation_to_quaternion
+from tpvp.visibility import covered_voxels
+from tpvp.viz import plot_coverage, plot_plan, write_recording
+
+
+def plan_frames(scene, order, roles) -> tuple[dict, dict, dict]:
+    """The executed views as plan tables in the scan frame and the planning frame, their frame
+    descriptions and the transform between them."""
+    space = scene.view_space
+    positions, look_ats = space.positions[order], space.look_ats[order]
+    rotations = look_at_rotations(positions, look_ats)
+    matrix = scene.plant_from_scan
+    scale = scene.scan_scale
+    linear = matrix[:3, :3] / scale  # a proper rotation: scan -> planning frame
+    # Inverse map p_scan = linear^T (p_plan - t) / scale; camera axes rotate with linear^T.
+    to_scan = lambda p: (p - matrix[:3, 3]) @ linear / scale  # noqa: E731
+    quats_plan = np.array([rotation_to_quaternion(r) for r in rotations]).reshape(-1, 4)
+    quats_scan = np.array([rotation_to_quaternion(linear.T @ r) for r in rotations]).reshape(-1, 4)
+    tables = {"scan": plan_table(to_scan(positions), to_scan(look_ats), quats_scan, roles),
+              "normalised": plan_table(positions, look_ats, quats_plan, roles)}
+    for table in tables.values():
+        table.insert(1, "view_index", order)
+    frames = {"scan": "the input scans' own frame, metres",
+              "normalised": "planning frame: the current scan turned up-axis to +Z, scaled by "
+                            f"{scale:.9g}, rotated about +Z and centred on its bounding box (plant_from_scan)"}
+    extra = {"plant_from_scan": matrix.tolist(), "scale": scale,
+             "plant_from_scan_note": "p_planning = M[:3, :3] @ p_scan + M[:3, 3]; the plan.csv views are in "
+                                     "the scan frame, plan_normalised.csv in the planning frame"}
+    return tables, frames, extra
+
+
+def write_case_outputs(folder, scene, result, config, name: str = "case", extra_summary: dict | None = None) -> dict:
+    """Results (JSON + CSV), the plan in both frames, ``config.yaml`` + ``provenance.json``, PNG
+    figures and a rerun ``.rrd`` in ``folder``."""
+    folder = Path(folder)
+    order = result.executed_views + result.planned_views
+    roles = ["initial"] + ["warm-up NBV"] * (len(result.executed_views) - 1) + ["planned"] * len(result.planned_views)
+    tables, frames, extra = plan_frames(scene, order, roles)
+    plans = write_plan(folder, tables, frames, extra)
+
+    summary = {"name": name, "configuration": config.name, "view_space": config.view_space,
+               "initial_view": order[0], "oracle_voxels": int(len(scene.oracle)),
+               "scale_planning_per_scan_m": scene.scan_scale,
+               "path_length_scan_m": result.path_length / scene.scan_scale,
+               **result.summary(), **(extra_summary or {})}
+    atomic_write_text(folder / "results.json", json.dumps(summary, indent=2, default=float) + "\n")
+    atomic_write_text(folder / "results.csv", pd.DataFrame([summary]).to_csv(index=False))
+    atomic_write_text(folder / "config.yaml", config_yaml(config, "resolved configuration of this run; "
+                                                          "re-run with: tpvp plan/demo --config config.yaml"))
+    seeds = {"registration": getattr(config.registration.embedded_deformation, "seed", None)}
+    atomic_write_text(folder / "provenance.json", json.dumps(provenance(config, seeds), indent=2) + "\n")
+
+    space = scene.view_space
+    centre, radius = result.obstacle
+    positions = space.positions[order]
+    polyline = np.concatenate([local_path_points(a, b, centre, radius) for a, b in zip(positions[:-1], positions[1:])]) \
+        if len(positions) > 1 else positions
+    plan_png = plot_plan(folder / "plan.png", scene.current, space.positions, space.positions[result.executed_views],
+                         space.positions[result.planned_views], polyline,
+                         f"{name}: {result.n_views} views, {100 * result.coverage:.2f}% coverage, "
+                         f"{result.path_length:.2f} m path", obstacle=(centre, radius),
+                         table_points=scene.table_points if len(scene.table_points) else None)
+    covered = np.zeros(scene.grid.size, bool)
+    covered[covered_voxels(scene.truth_visibility, order)] = True
+    observable = np.zeros(scene.grid.size, bool)
+    observable[scene.oracle] = True
+    plant = scene.grid.countable
+    coverage_png = plot_coverage(folder / "coverage.png", scene.grid.centres[plant], covered[plant],
+                                 observable[plant], f"{name}: ground-truth voxels "
+                                 f"({1e3 * config.gt_resolution:g} mm, planning frame)")
+    rrd = write_recording(
+        folder / "recording.rrd",
+        clouds={"current_truth": (scene.current, (120, 120, 120)), "previous": (result.clouds["previous"], (220, 60, 60)),
+                "coarse": (result.clouds["coarse"], (40, 90, 220)), "transferred": (result.clouds["warped"], (230, 140, 30)),
+                "inflation": (result.clouds["inflation"], (40, 180, 60))},
+        cameras={"warm_up_views": (positions[:len(result.executed_views)], space.look_ats[result.executed_views]),
+                 "planned_views": (space.positions[result.planned_views], space.look_ats[result.planned_views])},
+        paths={"global_path": polyline})
+    return {"results": folder / "results.json", "plan": plans["scan"], "plan_normalised": plans["normalised"],
+            "plan_json": plans["json"], "config": folder / "config.yaml", "provenance": folder / "provenance.json",
+            "figures": [plan_png, coverage_png], "recording": rrd}

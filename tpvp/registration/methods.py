@@ -1,0 +1,56 @@
+"""Registration methods, chosen by name (``registration.method``) from :data:`REGISTRATION_METHODS`.
+
+Signature of a method: ``register(previous (N, 3), coarse (M, 3), config: RegistrationConfig)
+-> Alignment``, both clouds in metres in one frame. Each method reads its own section of the
+configuration (``config.embedded_deformation`` for ``embedded-deformation``). A new method is one
+function plus one ``@REGISTRATION_METHODS.register`` line.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from tpvp.registration.embedded_deformation import register_embedded_deformation
+from tpvp.registry import Registry
+
+REGISTRATION_METHODS = Registry("registration method")
+
+
+@dataclass(frozen=True, eq=False)
+class Alignment:
+    """The previous session moved onto the current coarse reconstruction.
+
+    warped: (N, 3) the previous session's points after alignment. chamfer_before/after (m): the
+    symmetric Chamfer distance to the coarse reconstruction. details: the method's own result
+    (e.g. ``RegistrationResult`` of embedded deformation, with its graph and ``warp``).
+    """
+
+    warped: np.ndarray
+    chamfer_before: float
+    chamfer_after: float
+    seconds: float
+    details: object = field(default=None)
+
+
+@REGISTRATION_METHODS.register("embedded-deformation")
+def embedded_deformation(previous, coarse, config) -> Alignment:
+    """Embedded deformation optimised with Adam (the authors' single-plant registration)."""
+    result = register_embedded_deformation(previous, coarse, config.embedded_deformation)
+    return Alignment(result.warped, result.chamfer_before, result.chamfer_after, result.seconds, result)
+
+
+@REGISTRATION_METHODS.register("none")
+def no_registration(previous, coarse, config) -> Alignment:
+    """The previous session as it is (an ablation: no alignment)."""
+    from tpvp.metrics.geometry import chamfer_distance
+
+    previous = np.asarray(previous, dtype=np.float64)
+    chamfer = chamfer_distance(previous, coarse)
+    return Alignment(previous, chamfer, chamfer, 0.0)
+
+
+def register(previous, coarse, config) -> Alignment:
+    """Run the registration method named by ``config.method``."""
+    return REGISTRATION_METHODS.get(config.method)(previous, coarse, config)

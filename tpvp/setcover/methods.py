@@ -1,0 +1,70 @@
+"""View-selection methods, chosen by name (``selection.method``) from :data:`SELECTION_METHODS`.
+
+Signature of a method: ``select(problem: SelectionProblem, config: SelectionConfig) -> Selection``.
+The problem carries everything a one-shot selector may use: the visibility matrix of the candidate
+views on the planning surface, the executed views, the 6D candidates (a ``ViewSpace``), the
+planning voxels with optional weights, the coverage target, and for learned methods the NBV
+method's state (its occupancy map and view state of what was observed). A new method is one function plus one
+``@SELECTION_METHODS.register`` line.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from tpvp.errors import ConfigError
+from tpvp.registry import Registry
+from tpvp.setcover.ilp import solve_set_cover
+
+SELECTION_METHODS = Registry("view-selection method")
+
+
+@dataclass(frozen=True, eq=False)
+class SelectionProblem:
+    """visibility: sparse (views, planning voxels). executed: views already taken (never selected;
+    what they see needs no cover). view_space: the candidates (positions, look-ats).
+    voxel_centres (n, 3) and voxel_weights (n,) or None: the planning surface. coverage_target: the
+    fraction of the planning surface to see. nbv: the NBV method object that chose the warm-up
+    views; methods that learn from what was observed read ``nbv.occupancy`` (built on first use)
+    and ``nbv.view_state`` (None when not available)."""
+
+    visibility: object
+    executed: tuple
+    view_space: object
+    voxel_centres: np.ndarray
+    coverage_target: float = 1.0
+    voxel_weights: np.ndarray | None = None
+    nbv: object = None
+
+
+@dataclass(frozen=True, eq=False)
+class Selection:
+    """Selected views (sorted indices, executed ones excluded) and what is known of their quality.
+
+    optimal: proven fewest views for the target. status: in words. details: the method's own
+    result (``SetCoverResult`` for ``set-cover``: bound, gap, dropped voxels, solver)."""
+
+    selected: np.ndarray
+    optimal: bool
+    status: str
+    seconds: float
+    details: object = field(default=None)
+
+
+@SELECTION_METHODS.register("set-cover")
+def set_cover(problem: SelectionProblem, config) -> Selection:
+    """The paper's selection: the fewest views that see every coverable planning voxel (exact ILP)."""
+    if problem.coverage_target < 1.0:
+        raise ConfigError(f"selection.coverage_target={problem.coverage_target:g} needs a partial-cover "
+                          f"selection method; 'set-cover' covers everything (target 1.0)")
+    t0 = time.perf_counter()
+    result = solve_set_cover(problem.visibility, executed=problem.executed, config=config.set_cover)
+    return Selection(result.selected, result.optimal, result.status, time.perf_counter() - t0, result)
+
+
+def select_views(problem: SelectionProblem, config) -> Selection:
+    """Run the selection method named by ``config.method``."""
+    return SELECTION_METHODS.get(config.method)(problem, config)

@@ -1,0 +1,93 @@
+"""MILP solver plumbing shared by set cover (:mod:`tpvp.setcover`) and the exact path ILP (:mod:`tpvp.path`).
+
+Two solvers are supported: CBC (the binary bundled with PuLP, driven through PuLP) and HiGHS (the
+``highspy`` package, through PuLP or directly). This module checks the user-facing settings (solver
+name, time limit, threads) once, with the same :class:`~tpvp.errors.ConfigError` messages
+everywhere, and builds the solver objects.
+"""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+from tpvp.errors import ConfigError
+
+SOLVERS = ("cbc", "highs")
+
+
+def check_solver(name) -> str:
+    """``name`` if it is one of :data:`SOLVERS`, else a one-line :class:`ConfigError`."""
+    if not isinstance(name, str) or name not in SOLVERS:
+        raise ConfigError(f"solver must be one of {SOLVERS}, got {name!r}")
+    return name
+
+
+def check_time_limit(value) -> float:
+    """A positive number of seconds, as a float."""
+    if isinstance(value, (bool, np.bool_)) or not (isinstance(value, (int, float, np.integer, np.floating))
+                                                   and value > 0):
+        raise ConfigError(f"time_limit must be a positive number of seconds, got {value!r}")
+    return float(value)
+
+
+def check_threads(value) -> int:
+    """An integer >= 1."""
+    if isinstance(value, (bool, np.bool_)) or not (isinstance(value, (int, np.integer)) and value >= 1):
+        raise ConfigError(f"threads must be an integer >= 1, got {value!r}")
+    return int(value)
+
+
+def check_solver_settings(solver, time_limit, threads) -> None:
+    """Check a config's ``solver``, ``time_limit`` and ``threads`` fields (in that order)."""
+    check_solver(solver)
+    check_time_limit(time_limit)
+    check_threads(threads)
+
+
+def cbc_command(**options):
+    """PuLP's CBC command-line interface, preferring the binary bundled with PuLP.
+
+    ``COIN_CMD`` pointed at the bundled binary is what ``PULP_CBC_CMD`` does, without its PuLP 4
+    deprecation warning; a ``cbc`` on the PATH (``pip install pulp[cbc]``) is the fallback.
+    ``options`` go to ``pulp.COIN_CMD`` (``msg``, ``timeLimit``, ``threads``, ``gapRel``, ``gapAbs``,
+    ``logPath``, ...).
+    """
+    import pulp
+    from pulp.apis import coin_api
+
+    bundled = getattr(coin_api.PULP_CBC_CMD, "pulp_cbc_path", None)
+    path = bundled if bundled and os.path.isfile(bundled) and os.access(bundled, os.X_OK) else None
+    solver = pulp.COIN_CMD(path=path, **options)
+    if not solver.available():
+        raise ConfigError("solver 'cbc' is not available: PuLP's bundled CBC is missing and no 'cbc' is on "
+                          "the PATH (pip install 'pulp[cbc]'), or use solver='highs'")
+    return solver
+
+
+def milp_solver(name: str, time_limit: float, threads: int = 1, msg: bool = False, **options):
+    """A PuLP solver object for ``name`` ("cbc" or "highs") stopping after ``time_limit`` seconds.
+
+    ``options`` (e.g. ``gapRel``, ``gapAbs``; ``logPath`` for CBC) are passed on unchanged. Raises
+    :class:`ConfigError` for an unknown name, bad limits, or a solver that is not installed.
+    """
+    import pulp
+
+    name = check_solver(name)
+    time_limit = check_time_limit(time_limit)
+    threads = check_threads(threads)
+    if name == "cbc":
+        return cbc_command(msg=msg, timeLimit=time_limit, threads=threads, **options)
+    highspy_module()  # a clear error when HiGHS is missing (PuLP would fail only at solve time)
+    return pulp.HiGHS(msg=msg, timeLimit=time_limit, threads=threads, **options)
+
+
+def highspy_module():
+    """The ``highspy`` module, or a :class:`ConfigError` saying how to install it."""
+    try:
+        import highspy
+    except ImportError as exc:  # pragma: no cover - highspy ships with the project's environment
+        raise ConfigError("solver 'highs' needs the highspy package (pip install highspy), "
+                          "or use solver='cbc'") from exc
+    return highspy

@@ -1,0 +1,1 @@
+"""Generated plants and greenhouse rows for tests, calibration and offline experiments."""

@@ -1,0 +1,195 @@
+"""View spaces as objects: candidate positions, their look-at targets and what goes with them.
+
+A view space is chosen by name from :data:`VIEW_SPACES` (``hemisphere``, ``sphere``, ``room1``,
+``room4``), by a pattern (``tammes:N``, ``tammes-hemisphere:N``) or by a file path (``x y z`` or
+``x y z lx ly lz`` rows, an optional count line first). A user's own view space is one file, or
+one function registered with ``@VIEW_SPACES.register("name")`` that returns a :class:`ViewSpace`.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from tpvp.errors import ConfigError, InputFileError
+from tpvp.registry import Registry
+
+DATA = Path(__file__).resolve().parent.parent / "data" / "view_spaces"
+BUNDLED = {"hemisphere": "view_space_hemisphere32.txt", "sphere": "view_space_sphere63.txt"}
+# 0-based rows of the hemisphere file (docs/single_plant.md#initial-views): near-horizontal (7 deg),
+# oblique (48 deg) and near-top (77 deg). The sphere file starts with the same 32 rows.
+INITIAL_VIEW_INDICES = {"near_horizontal": 17, "oblique": 8, "near_top": 21}
+PLANT_RADIUS = 0.4  # m, radius of the bundled single-plant view spheres
+PLANT_RANGE = 1.0  # m, sensor range of the single-plant setting
+ROW_RANGE = 2.0  # m, sensor range of the greenhouse-row setting
+
+VIEW_SPACES = Registry("view space")
+
+
+@dataclass(frozen=True, eq=False)
+class ViewSpace:
+    """Candidate views: ``positions`` and ``look_ats`` ``(V, 3)`` in metres, plant frame.
+
+    table: whether the setting has a supporting table under the plant (occluder, never counted).
+    initial_views: named initial views (index into the positions). max_range: the sensor range (m)
+    the view space is meant for. passive_views ``(P, 6)`` (position, look-at) and passive_cost (m):
+    the fixed passive sweep of a greenhouse room (empty for plants). look_at_fixed: False when the
+    planner chooses the look-ats (greenhouse rows), True when they belong to the view space.
+    """
+
+    name: str
+    positions: np.ndarray
+    look_ats: np.ndarray
+    table: bool = False
+    initial_views: dict = field(default_factory=dict)
+    max_range: float = PLANT_RANGE
+    passive_views: np.ndarray = field(default_factory=lambda: np.zeros((0, 6)))
+    passive_cost: float = 0.0
+    look_at_fixed: bool = True
+
+    def __post_init__(self):
+        positions = np.array(self.positions, dtype=np.float64).reshape(-1, 3)
+        look_ats = np.array(np.broadcast_to(np.asarray(self.look_ats, dtype=np.float64).reshape(-1, 3),
+                                            positions.shape))
+        if len(positions) == 0:
+            raise ConfigError(f"view space {self.name!r} has no views")
+        if not (np.all(np.isfinite(positions)) and np.all(np.isfinite(look_ats))):
+            raise ConfigError(f"view space {self.name!r} has NaN or infinite coordinates")
+        if np.any(np.linalg.norm(positions - look_ats, axis=1) == 0):
+            raise ConfigError(f"view space {self.name!r}: a view looks at its own position")
+        for key, index in self.initial_views.items():
+            if not 0 <= int(index) < len(positions):
+                raise ConfigError(f"view space {self.name!r}: initial view {key!r} = {index} is out of range")
+        for a in (positions, look_ats):
+            a.flags.writeable = False
+        object.__setattr__(self, "positions", positions)
+        object.__setattr__(self, "look_ats", look_ats)
+
+    def __len__(self) -> int:
+        return len(self.positions)
+
+    @property
+    def poses(self) -> np.ndarray:
+        """``(V, 6)`` rows ``x y z lx ly lz``."""
+        return np.hstack([self.positions, self.look_ats])
+
+    def view_index(self, view: int | str) -> int:
+        """A view given by index or by one of the named initial views; out of range is refused."""
+        if isinstance(view, str) and not view.lstrip("-").isdigit():
+            if view not in self.initial_views:
+                raise ConfigError(f"initial view {view!r} is not one of {sorted(self.initial_views)} "
+                                  f"of view space {self.name!r}")
+            return int(self.initial_views[view])
+        index = int(view)
+        if not 0 <= index < len(self):
+            raise ConfigError(f"initial_view {index} is not one of the {len(self)} views of view space "
+                              f"{self.name!r} (0..{len(self) - 1})")
+        return index
+
+    def scaled(self, factor: float) -> "ViewSpace":
+        """Positions and look-ats scaled about the origin (the plant centre), range included."""
+        if not (np.isfinite(factor) and factor > 0):
+            raise ConfigError(f"view-space scale factor must be > 0, got {factor!r}")
+        return replace(self, positions=self.positions * factor, look_ats=self.look_ats * factor,
+                       max_range=self.max_range * factor,
+                       passive_views=self.passive_views * factor, passive_cost=self.passive_cost * factor)
+
+    def with_radius(self, radius: float) -> "ViewSpace":
+        """Positions moved onto a sphere of ``radius`` around their look-at (range kept)."""
+        if not (np.isfinite(radius) and radius > 0):
+            raise ConfigError(f"view-space radius must be > 0 m, got {radius!r}")
+        offset = self.positions - self.look_ats
+        return replace(self, positions=self.look_ats + offset / np.linalg.norm(offset, axis=1, keepdims=True) * radius)
+
+
+def read_view_space_file(path, name: str | None = None) -> ViewSpace:
+    """A view-space file: an optional count line, then ``x y z`` rows (look at the origin) or
+    ``x y z lx ly lz`` rows. No table; the single-plant sensor range."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputFileError(f"view space {str(path)!r} is neither one of {', '.join(VIEW_SPACES.names())}, "
+                             f"'tammes:N' nor an existing file")
+    try:
+        rows = [line.split() for line in path.read_text().splitlines() if line.strip() and not line.startswith("#")]
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputFileError(f"{path}: cannot read the view-space file ({exc})") from None
+    declared = None
+    if rows and len(rows[0]) == 1:
+        declared, rows = rows[0][0], rows[1:]
+    try:
+        values = np.array(rows, dtype=np.float64)
+    except ValueError:
+        raise InputFileError(f"{path}: not a view-space file (optional count line, then rows of "
+                             f"'x y z' or 'x y z lx ly lz')") from None
+    if values.ndim != 2 or values.shape[1] not in (3, 6) or len(values) == 0:
+        raise InputFileError(f"{path}: expected rows of 3 ('x y z') or 6 ('x y z lx ly lz') numbers, "
+                             f"got shape {values.shape}")
+    if declared is not None:
+        if not re.fullmatch(r"\d+", declared):
+            raise InputFileError(f"{path}: the count line must be a whole number of views, got {declared!r}")
+        if int(declared) != len(values):
+            raise InputFileError(f"{path}: first line declares {declared} views but {len(values)} follow")
+    if not np.all(np.isfinite(values)):
+        raise InputFileError(f"{path}: contains NaN or infinite coordinates")
+    look_ats = values[:, 3:] if values.shape[1] == 6 else np.zeros((len(values), 3))
+    if np.any(np.linalg.norm(values[:, :3] - look_ats, axis=1) == 0):
+        raise InputFileError(f"{path}: a view looks at its own position")
+    return ViewSpace(name or str(path), values[:, :3], look_ats)
+
+
+@VIEW_SPACES.register("hemisphere", "the authors' 32 views on a 0.4 m hemisphere, with a table")
+def hemisphere() -> ViewSpace:
+    space = read_view_space_file(DATA / BUNDLED["hemisphere"], "hemisphere")
+    return replace(space, table=True, initial_views=dict(INITIAL_VIEW_INDICES))
+
+
+@VIEW_SPACES.register("sphere", "the authors' 63 views on a 0.4 m sphere (first 32 = hemisphere), no table")
+def sphere() -> ViewSpace:
+    space = read_view_space_file(DATA / BUNDLED["sphere"], "sphere")
+    return replace(space, initial_views=dict(INITIAL_VIEW_INDICES))
+
+
+def _room(room: str) -> ViewSpace:
+    from tpvp.scene.boxes import room_config
+
+    config = room_config(room)
+    # The planner assigns look-at targets per session (docs/greenhouse.md); until then every
+    # candidate looks at the plant box centre.
+    return ViewSpace(room, config.candidate_positions, config.plant_box.center, max_range=ROW_RANGE,
+                     passive_views=config.initial_views, passive_cost=config.passive_cost, look_at_fixed=False)
+
+
+@VIEW_SPACES.register("room1", "greenhouse room 1: 1,000 candidate positions, 15 passive views")
+def room1() -> ViewSpace:
+    return _room("room1")
+
+
+@VIEW_SPACES.register("room4", "greenhouse room 4: 1,000 candidate positions, 15 passive views")
+def room4() -> ViewSpace:
+    return _room("room4")
+
+
+def get_view_space(spec: str | Path) -> ViewSpace:
+    """The view space named ``spec``: a registered name, ``tammes:N`` (N well-spread views on the
+    0.4 m sphere), ``tammes-hemisphere:N`` (upper hemisphere, with a table) or a file path."""
+    spec_text = str(spec)
+    if spec_text in VIEW_SPACES:
+        return VIEW_SPACES.get(spec_text)()
+    match = re.fullmatch(r"tammes(-hemisphere)?:(\d+)", spec_text)
+    if match:
+        from tpvp.viewspace.tammes import generate_view_space
+
+        upper = bool(match.group(1))
+        positions = generate_view_space(int(match.group(2)), radius=PLANT_RADIUS, hemisphere=upper)
+        return ViewSpace(spec_text, positions, np.zeros(3), table=upper)
+    if spec_text.startswith("tammes"):
+        raise ConfigError(f"view space {spec_text!r}: write tammes:N or tammes-hemisphere:N with a view count N")
+    return read_view_space_file(spec_text)
+
+
+def view_space_choices() -> str:
+    """One line listing the view-space choices (for help texts)."""
+    return ", ".join(VIEW_SPACES.names()) + ", tammes:N, tammes-hemisphere:N or a file"
