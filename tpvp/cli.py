@@ -42,7 +42,10 @@ def _config(args):
     from tpvp.config import load_config, parse_overrides
 
     overrides = {}
-    for key, value in (("view_space", args.view_space), ("initial_view", args.initial_view),
+    initial = args.initial_view
+    if initial is not None and initial.lstrip("-").isdigit():
+        initial = int(initial)
+    for key, value in (("view_space", args.view_space), ("initial_view", initial),
                        ("scene.scale", args.scale), ("scene.radius", args.radius), ("scene.up_axis", args.up_axis)):
         if value is not None:
             overrides[key] = value

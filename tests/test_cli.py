@@ -1,0 +1,78 @@
+"""The command line: version, configuration commands and the checks made before any work."""
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from tpvp import __version__
+from tpvp.cli import main
+from tpvp.config import load_config
+
+
+def _one_error_line(capsys, *words):
+    err = capsys.readouterr().err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in err, err
+    for word in words:
+        assert word in lines[0], lines[0]
+    return lines[0]
+
+
+def test_version(capsys):
+    with pytest.raises(SystemExit) as info:
+        main(["--version"])
+    assert info.value.code == 0 and capsys.readouterr().out.strip() == f"tpvp {__version__}"
+
+
+def test_config_command_prints_a_loadable_resolved_configuration(tmp_path, capsys):
+    assert main(["config", "--set", "gt_resolution=0.001", "--view-space", "sphere", "--derived"]) == 0
+    out = capsys.readouterr().out
+    assert "# derived parameters" in out and "inflation.gamma_far = 2.5 x gt_resolution" in out
+    (tmp_path / "c.yaml").write_text(out)
+    config = load_config(tmp_path / "c.yaml")
+    assert config.view_space == "sphere" and config.inflation.gamma_far == pytest.approx(0.0025)
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["demo", "--initial-view", "40"], ["initial_view 40", "32 views"]),
+    (["demo", "--initial-view", "top"], ["'top'", "near_top"]),
+    (["demo", "--set", "registration.iters=3"], ["unknown configuration key 'registration.iters'"]),
+    (["demo", "--set", "nbv.method=random"], ["unknown NBV method 'random'"]),
+    (["demo", "--config", "nowhere.yaml"], ["nowhere.yaml"]),
+])
+def test_bad_options_are_refused_before_any_work_on_one_line(tmp_path, capsys, argv, words):
+    assert main([*argv, "--output", str(tmp_path / "out")]) == 2
+    _one_error_line(capsys, *words)
+    assert not (tmp_path / "out").exists()
+
+
+def test_plan_refuses_an_out_of_range_initial_view_before_reading_scans(tmp_path, capsys):
+    assert main(["plan", "--previous", str(tmp_path / "a.ply"), "--current", str(tmp_path / "b.ply"),
+                 "--view-space", "sphere", "--initial-view", "63", "--output", str(tmp_path / "o")]) == 2
+    _one_error_line(capsys, "initial_view 63", "63 views")
+
+
+def test_unknown_view_space_is_one_line():
+    result = subprocess.run([sys.executable, "-m", "tpvp", "plan", "--previous", "a", "--current", "b",
+                             "--view-space", "cube"], capture_output=True, text=True)
+    assert result.returncode == 2 and "Traceback" not in result.stderr
+    assert "'cube' is neither one of hemisphere" in result.stderr
+
+
+def test_plan_on_gzip_scans_says_which_units_it_chose(tmp_path, capsys):
+    import gzip
+
+    from tpvp.scene.samples import sample_path
+
+    data = gzip.decompress(sample_path("tomato_0306").read_bytes())
+    rows = np.loadtxt(data.decode().splitlines())[::4]  # a quarter of the points keeps it quick
+    for name in ("day1.xyz.gz", "day2.xyz.gz"):
+        (tmp_path / name).write_bytes(gzip.compress("\n".join(" ".join(map(str, r[:3])) for r in rows).encode()))
+    assert main(["plan", "--previous", str(tmp_path / "day1.xyz.gz"), "--current", str(tmp_path / "day2.xyz.gz"),
+                 "--set", "registration.embedded_deformation.iterations=5", "--output", str(tmp_path / "o")]) == 0
+    out = capsys.readouterr().out
+    assert "day1.xyz.gz: units: auto -> mm" in out
+    for name in ("plan.csv", "plan_normalised.csv", "plan.json", "config.yaml", "provenance.json"):
+        assert (tmp_path / "o" / name).stat().st_size > 0
