@@ -1,6 +1,9 @@
 """``python -m data_tools``: download and clean the public data, prepare new sessions.
 
-Errors the user can fix are printed on one line (exit status 2), never as a traceback.
+Errors the user can fix are printed on one line (exit status 2), never as a traceback; a dataset
+being written by another run is refused at once (exit status 3), outputs that could not be written
+(disk full, permissions) leave the dataset as it was (exit status 4), and Ctrl-C says whether the
+dataset was updated (exit status 130).
 """
 
 from __future__ import annotations
@@ -82,10 +85,12 @@ def _greenhouse_standin(args) -> int:
 
 
 def _prepare_session(args) -> int:
+    from data_tools.greenhouse import check_site, parse_date
     from data_tools.sessions import prepare_session
 
+    site, date = check_site(args.site, "--site"), parse_date(args.date, "--date")  # errors name the option
     clean, icp = _clean_configs(args)
-    row = prepare_session(args.dataset, args.site, args.date, args.scan, landmarks=args.landmarks,
+    row = prepare_session(args.dataset, site, date, args.scan, landmarks=args.landmarks,
                           units=args.units, clean=clean, icp=icp, force=args.force)
     print(f"{row['site']} {row['date']}: {row['points_raw']} -> {row['points']} points, alignment "
           f"{row['alignment']} (fitness {row['fitness']:.3f}, RMSE {1000 * row['inlier_rmse_m']:.1f} mm, "
@@ -152,7 +157,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_greenhouse_standin)
 
     p = sub.add_parser("prepare-session", help="add a new scan of a site to a dataset (crop, clean, align)")
-    p.add_argument("--site", required=True, help="site name, e.g. room1")
+    p.add_argument("--site", required=True, help="site name, e.g. room1 (letters, digits, '-', '_')")
     p.add_argument("--date", required=True, help="session date, YYYY-MM-DD")
     p.add_argument("--scan", required=True, type=Path, help="the new scan (ply/pcd/xyz/obj)")
     p.add_argument("--landmarks", type=Path, default=None,

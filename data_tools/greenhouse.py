@@ -18,15 +18,16 @@ Output (:func:`clean_greenhouse`), a dataset folder the notebooks and ``prepare-
     report/<site>_sessions.png                 side and top views of every cleaned session
     manifest.csv (+ .parquet)                  one row per session, see MANIFEST_COLUMNS
 
-The whole output is staged and committed at the end (:mod:`data_tools.staging`): an interrupted
-run leaves an existing dataset exactly as it was.
+The whole output is written into a staging folder beside the dataset and published in one step
+(:func:`tpvp.io.publish.staged_folder`, a whole new dataset: ``--force`` replaces the previous one):
+a concurrent run on the same dataset is refused (exit status 3), and an error or Ctrl-C leaves the
+dataset wholly old or wholly new.
 """
 
 from __future__ import annotations
 
 import datetime as dt
 import re
-import shutil
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -37,8 +38,8 @@ from data_tools.alignment import Alignment, IcpConfig, align_to_reference, trans
 from data_tools.cleaning import CleanConfig, clean_scan, voxel_downsample
 from data_tools.errors import ConfigError, DatasetError, InputFileError, PointCloudError
 from data_tools.manifest import read_table, stage_table
-from data_tools.staging import staged_update
-from tpvp.io import READ_EXTENSIONS, cloud_extension, read_point_cloud, write_point_cloud
+from tpvp.io import READ_EXTENSIONS, atomic_write_bytes, atomic_write_text, cloud_extension, read_point_cloud, write_point_cloud
+from tpvp.io.publish import staged_folder
 from tpvp.scene.boxes import DATA_DIR as BUNDLED_CONFIG_DIR
 from tpvp.scene.boxes import OrientedBox, read_bbx_config
 from tpvp.viz import plot_row_sessions
@@ -83,6 +84,20 @@ class Discovery:
             lines.append(f"skipped {len(self.skipped)} file(s):")
             lines += [f"  {name}: {why}" for name, why in self.skipped]
         return "\n".join(lines)
+
+
+_SITE_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_\-]{0,63}")
+
+
+def check_site(value, what: str = "site") -> str:
+    """A site (room) name as used in the dataset's file names: 1-64 ASCII letters, digits, '-' or
+    '_', starting with a letter or digit; returned lower-case. ConfigError naming ``what`` otherwise
+    (so ``../x``, ``a/b`` or an empty name can never move a file out of the dataset layout)."""
+    text = str(value).strip() if value is not None else ""
+    if not _SITE_NAME.fullmatch(text):
+        raise ConfigError(f"{what} must be 1-64 letters, digits, '-' or '_' (starting with a letter or "
+                          f"digit), got {value!r}")
+    return text.lower()
 
 
 def parse_date(value, what: str = "date") -> dt.date:
@@ -187,9 +202,10 @@ def _sessions_from_manifest(path: Path, landmarks_dir: Path | None) -> Discovery
     sessions, seen = [], set()
     for i, row in table.iterrows():
         where = f"{path}, row {i + 2}"
-        site = row[site_column].strip().lower()
-        if not re.fullmatch(r"[a-z0-9][a-z0-9_\-]*", site):
-            raise DatasetError(f"{where}: site {row[site_column]!r} must be letters, digits, '_' or '-'")
+        try:
+            site = check_site(row[site_column], f"{where}: site")
+        except ConfigError as exc:
+            raise DatasetError(str(exc)) from None
         date = parse_date(row["date"], f"{where}: date")
         scan = (path.parent / row["file"]).resolve()
         if not scan.is_file():
@@ -254,7 +270,16 @@ def write_reference(stage, site: str, points: np.ndarray, icp: IcpConfig) -> Non
 def write_session(stage, scan: SessionScan, cleaned: np.ndarray, alignment: Alignment) -> None:
     """Stage a session's model and transform."""
     write_point_cloud(stage.path(f"{PROCESSED_FOLDER}/{scan.name}.pcd"), cleaned, dtype="float32")
-    stage.path(f"transforms/{scan.name}.txt").write_text(_transform_text(alignment.transform))
+    atomic_write_text(stage.path(f"transforms/{scan.name}.txt"), _transform_text(alignment.transform))
+
+
+def stage_copy(stage, source: Path, relative: str) -> None:
+    """Copy an input file (a box configuration) into the stage, atomically."""
+    try:
+        data = Path(source).read_bytes()
+    except OSError as exc:
+        raise InputFileError(f"{source}: cannot read ({exc.strerror or exc})") from None
+    atomic_write_bytes(stage.path(relative), data)
 
 
 def process_session(scan: SessionScan, points: np.ndarray, reference: np.ndarray | None,
@@ -285,18 +310,19 @@ def clean_greenhouse(source=None, output="data/greenhouse", *, manifest=None, la
     """Clean every session found in ``source`` (or ``manifest``) and align it to its site's first day.
 
     Writes the dataset described in the module docstring to ``output`` and returns its manifest.
-    Refuses to replace an existing dataset's manifest without ``force``.
+    Refuses to replace an existing dataset's manifest without ``force``. The output is a whole new
+    dataset (``staged_folder`` without ``keep_existing``): with ``force`` it replaces the previous
+    one, files of sessions no longer found included, so old and new sessions never mix. An output
+    folder inside the source is allowed (it is skipped when looking for scans); one that holds or is
+    an input is refused.
     """
     from tqdm.auto import tqdm
 
     output = Path(output)
-    if (output / "manifest.csv").exists() and not force:
-        raise DatasetError(f"{output}/manifest.csv exists: pass --force to rebuild the dataset")
     if manifest is None and source is not None:
         _refuse_output_over_input(output, [Path(source)])
     found = find_sessions(source, manifest=manifest, landmarks=landmarks, exclude=output)
     _refuse_output_over_input(output, [scan.path for scan in found.sessions])
-    log(found.report())
     sites = sorted({s.site for s in found.sessions})
     boxes = {}
     for site in sites:
@@ -304,12 +330,18 @@ def clean_greenhouse(source=None, output="data/greenhouse", *, manifest=None, la
         if boxes[site][0] is None:
             raise InputFileError(f"no plant box for site {site!r}: put {site}_bbx_config.yaml in a folder "
                                  "and pass it with --config (format: tpvp/data/greenhouse_row/room1_bbx_config.yaml)")
+    inputs = [scan.path for scan in found.sessions] + [scan.landmarks for scan in found.sessions if scan.landmarks]
+    inputs += [path for _, path in boxes.values()] + ([Path(manifest)] if manifest is not None else [])
     rows = []
-    with staged_update(output) as stage:
+    with staged_folder(output, inputs=inputs, what="dataset") as stage:
+        # Under the dataset's lock: no other run can write it between this check and the commit.
+        if stage.existing("manifest.csv").exists() and not force:
+            raise DatasetError(f"{output}/manifest.csv exists: pass --force to rebuild the dataset")
+        log(found.report())
         for site in sites:
             config, config_path = boxes[site]
             box = config["plant_box"]
-            shutil.copyfile(config_path, stage.path(f"config/{site}_bbx_config.yaml"))
+            stage_copy(stage, config_path, f"config/{site}_bbx_config.yaml")
             reference, models, titles = None, [], []
             for scan in tqdm([s for s in found.sessions if s.site == site], desc=f"cleaning {site}",
                              unit="session", disable=not progress):

@@ -7,12 +7,14 @@ an interruption leaves the CSV - the table of record - either old or new, never 
 from __future__ import annotations
 
 import io
+import json
 from pathlib import Path
 
 import pandas as pd
 
 from data_tools.errors import DatasetError, InputFileError
 from tpvp.io import atomic_path, atomic_write_text
+from tpvp.io.publish import RUN_MARKER
 
 
 def write_table(df: pd.DataFrame, path, parquet: bool = True) -> Path:
@@ -48,7 +50,36 @@ def read_table(path, required: tuple[str, ...] = ()) -> pd.DataFrame:
 
 
 def stage_table(stage, table: pd.DataFrame, name: str) -> None:
-    """Write ``table`` as ``name`` (CSV) plus its Parquet copy into a staged update
-    (:mod:`data_tools.staging`), registered now: stage the manifest last so it moves in last."""
+    """Write ``table`` as ``name`` (CSV) plus its Parquet copy into the staging folder of a
+    :func:`tpvp.io.publish.staged_folder` run (both files are new files there: the published copies
+    of a ``keep_existing`` stage are never touched)."""
     stage.path(Path(name).with_suffix(".parquet"))
     write_table(table, stage.path(name))
+
+
+def _files(folder: Path) -> set[str]:
+    return {p.relative_to(folder).as_posix() for p in folder.rglob("*") if not p.is_dir()} if folder.is_dir() else set()
+
+
+def record_written(stage) -> None:
+    """Add the files this run created to the dataset's list of files tpvp wrote (``.tpvp-run.json``,
+    see :mod:`tpvp.io.publish`), so that a later rebuild with ``--force`` (a whole-folder run) may
+    replace them. Call it last in a ``keep_existing`` stage. A new dataset gets the list; a dataset
+    that has none (written by hand or by an older version) keeps having none - its other files'
+    origin is unknown."""
+    marker = stage.existing(RUN_MARKER)
+    if marker.is_file():
+        try:
+            payload = json.loads(marker.read_text())
+            listed = set(payload["files"])
+        except (OSError, ValueError, TypeError, KeyError):
+            return  # unreadable: leave it as it is, a --force rebuild will name the files it refuses
+    elif not stage.destination.exists():
+        payload, listed = {}, set()
+    else:
+        return
+    created = _files(stage.folder) - _files(stage.destination) - {RUN_MARKER}
+    if not created - listed and marker.is_file():
+        return
+    payload["files"] = sorted(listed | created)
+    atomic_write_text(stage.path(RUN_MARKER), json.dumps(payload, indent=1) + "\n")

@@ -32,8 +32,8 @@ import pandas as pd
 from data_tools.download import download_file, verify_zip
 from data_tools.errors import ConfigError, DatasetError, InputFileError, TpvpError
 from data_tools.manifest import stage_table
-from data_tools.staging import staged_update
-from tpvp.io import read_point_cloud, write_point_cloud
+from tpvp.io import atomic_write_bytes, atomic_write_text, read_point_cloud, write_point_cloud
+from tpvp.io.publish import staged_folder
 from tpvp.scene.normalise import normalise_plant
 from tpvp.scene.voxels import voxel_centres
 
@@ -330,8 +330,12 @@ def prepare_pheno4d(source=None, output="data/pheno4d", config: Pheno4DConfig = 
     ``config.largest_side``, centred; each scan on its own, so two days' copies do not share a
     frame) and
     ``..._gt<res>mm.ply`` (ground-truth voxel centres of the normalised plant), then ``NOTICE.md``,
-    ``pairs.csv`` and, last, ``manifest.csv`` (+ Parquet copies), all committed together at the end
-    (:mod:`data_tools.staging`). Returns the manifest; its
+    ``pairs.csv`` and ``manifest.csv`` (+ Parquet copies), written into a staging folder beside
+    ``output`` and published in one step (:func:`tpvp.io.publish.staged_folder`). The output is a
+    whole new dataset: ``force`` replaces the previous one (files of plants no longer in the source
+    included, so two preparations never mix); a concurrent run on the same output is refused at once
+    (exit status 3), an output that is, holds or lies inside the source is refused, and an error or
+    Ctrl-C leaves the output wholly old or wholly new. Returns the manifest; its
     ``attrs`` hold ``"pairs"`` (DataFrame) and ``"skipped"`` (list of (name, reason)).
     """
     from tqdm.auto import tqdm
@@ -339,10 +343,6 @@ def prepare_pheno4d(source=None, output="data/pheno4d", config: Pheno4DConfig = 
     if not isinstance(config, Pheno4DConfig):
         raise ConfigError(f"config must be a Pheno4DConfig, got {type(config).__name__}")
     output = Path(output)
-    manifest_path = output / "manifest.csv"
-    if manifest_path.exists() and not force:
-        raise DatasetError(f"{manifest_path} exists: this dataset was prepared already; pass "
-                           f"--force to prepare it again (files are replaced)")
 
     if source is None:
         from tpvp.scene.samples import SAMPLES
@@ -351,15 +351,20 @@ def prepare_pheno4d(source=None, output="data/pheno4d", config: Pheno4DConfig = 
         shown = {r.source: f"tpvp/data/pheno4d/{SAMPLES[name]}"
                  for r, (name, *_) in zip(records, _BUNDLED)}
         archive_path = None
+        inputs = [r.source for r in records]
     else:
         records, skipped = find_scans(source, year=config.year)
         shown = {r.source: r.source for r in records}
         archive_path = Path(source) if Path(source).is_file() else None
+        inputs = [source]
 
     rows = []
-    # Everything is staged and moved into place at the end, manifest last: an interrupted or
-    # failed run leaves an existing dataset exactly as it was.
-    with staged_update(output) as stage, contextlib.ExitStack() as stack:
+    with staged_folder(output, inputs=inputs, what="dataset") as stage, contextlib.ExitStack() as stack:
+        # Under the output's lock: no other run can prepare it between this check and the commit.
+        manifest_path = output / "manifest.csv"
+        if stage.existing("manifest.csv").exists() and not force:
+            raise DatasetError(f"{manifest_path} exists: this dataset was prepared already; pass "
+                               f"--force to prepare it again (files are replaced)")
         archive, prefix, workdir = None, "", None
         if archive_path is not None:
             try:
@@ -455,7 +460,7 @@ def _write_notice(stage, source, config: Pheno4DConfig,
     if source is None:
         from tpvp.scene.samples import DATA
 
-        shutil.copyfile(DATA / "LICENSE", stage.path("LICENSE"))
+        atomic_write_bytes(stage.path("LICENSE"), (DATA / "LICENSE").read_bytes())
         text = [
             "# Pheno4D samples bundled with tpvp",
             "",
@@ -482,4 +487,4 @@ def _write_notice(stage, source, config: Pheno4DConfig,
     if skipped:
         text += ["", f"Files skipped ({len(skipped)}):", ""]
         text += [f"- `{name}`: {reason}" for name, reason in skipped]
-    stage.path("NOTICE.md").write_text("\n".join(text) + "\n", encoding="utf-8")
+    atomic_write_text(stage.path("NOTICE.md"), "\n".join(text) + "\n")

@@ -1,5 +1,6 @@
 """The command line: version, configuration commands and the checks made before any work."""
 
+import json
 import subprocess
 import sys
 
@@ -76,3 +77,44 @@ def test_plan_on_gzip_scans_says_which_units_it_chose(tmp_path, capsys):
     assert "day1.xyz.gz: units: auto -> mm" in out
     for name in ("plan.csv", "plan_normalised.csv", "plan.json", "config.yaml", "provenance.json"):
         assert (tmp_path / "o" / name).stat().st_size > 0
+
+
+def _cloud(path, points):
+    np.savetxt(path, points)
+    return str(path)
+
+
+def test_implausible_scans_are_refused_in_the_scans_terms(tmp_path, capsys):
+    rng = np.random.default_rng(0)
+    plant = rng.normal(size=(3000, 3)) * 0.02
+    good = _cloud(tmp_path / "good.xyz", plant)
+    out = str(tmp_path / "o")
+    three = _cloud(tmp_path / "three.xyz", plant[:3])
+    assert main(["plan", "--previous", good, "--current", three, "--units", "m", "--output", out]) == 2
+    _one_error_line(capsys, "three.xyz", "only 3 occupied 2 mm voxels")
+    far = _cloud(tmp_path / "far.xyz", plant + [5.0, 0, 0])
+    assert main(["plan", "--previous", far, "--current", good, "--units", "m", "--output", out]) == 2
+    _one_error_line(capsys, "far.xyz", "good.xyz", "do not overlap", "m apart")
+    small = _cloud(tmp_path / "small.xyz", plant / 1000)
+    assert main(["plan", "--previous", small, "--current", good, "--units", "m", "--output", out]) == 2
+    _one_error_line(capsys, "small.xyz", "different units")
+    holes = plant.copy()
+    holes[10] = np.nan
+    nan = _cloud(tmp_path / "nan.xyz", holes)
+    assert main(["plan", "--previous", nan, "--current", good, "--units", "m", "--output", out]) == 2
+    _one_error_line(capsys, "nan.xyz", "--drop-invalid")
+    assert not (tmp_path / "o").exists()
+
+
+def test_a_previous_session_of_another_plant_is_warned_about(tmp_path, capsys):
+    # The audit's case: the bundled real maize as the previous session of the real tomato ends at
+    # 18.5 mm Chamfer (7.7 % of the plant); matching real and generated pairs end at 0.4-0.7 %.
+    from tpvp.scene.samples import load_sample
+
+    previous = _cloud(tmp_path / "maize.xyz", load_sample("maize_0313")[::4])
+    current = _cloud(tmp_path / "tomato.xyz", load_sample("tomato_0306"))
+    assert main(["plan", "--previous", previous, "--current", current, "--units", "m",
+                 "--set", "registration.embedded_deformation.iterations=100", "--output", str(tmp_path / "o")]) == 0
+    err = capsys.readouterr().err
+    assert "warning: registration of" in err and "maize.xyz" in err and "same plant" in err
+    assert "same plant" in json.loads((tmp_path / "o" / "results.json").read_text())["warnings"]

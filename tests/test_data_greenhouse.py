@@ -178,7 +178,7 @@ def test_clean_raw_captures_recovers_offsets_keeps_plants_removes_background(raw
     assert (out / "config" / "room1_bbx_config.yaml").is_file() and (out / "reference" / "room1_static.pcd").is_file()
     figure = (out / "report" / "room1_sessions.png").read_bytes()
     assert figure.startswith(b"\x89PNG") and len(figure) > 20_000
-    assert not list(out.glob(".staging-*"))
+    assert not list(out.parent.glob(f".{out.name}.tpvp-staging-*")) and not list(out.parent.glob(f".{out.name}.tpvp-old-*"))
 
 
 def test_cleaning_processed_models_again_is_harmless(tmp_path):

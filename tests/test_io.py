@@ -576,8 +576,9 @@ def test_nan_coordinates(tmp_path, cloud):
                              + bad.astype("<f8").tobytes())
         else:
             np.savetxt(path, np.column_stack([bad, labels]))
-        raises_naming(PointCloudError, path, read_point_cloud, path,
-                      match="3 of 500 points have NaN/inf")
+        msg = raises_naming(PointCloudError, path, read_point_cloud, path,
+                            match="3 of 500 points have NaN/inf")
+        assert "first at point 4" in msg and "--drop-invalid" in msg and "drop_invalid=True" in msg
         with pytest.warns(UserWarning, match="dropped 3 of 500"):
             got, got_labels = read_point_cloud(path, drop_invalid=True, return_labels=True)
         keep = np.ones(500, bool)

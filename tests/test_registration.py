@@ -10,10 +10,10 @@ from tpvp.registration import (
     EDConfig,
     axis_angle_to_matrix,
     register_embedded_deformation,
-    voxel_centroids,
 )
 from tpvp.registration.embedded_deformation import _Adam, _anchors, _edges, _warp_numpy
 from tpvp.scene.normalise import normalise_plant
+from tpvp.scene.voxels import voxel_centroids
 from tpvp.synthetic.plants import generate_plant
 
 

@@ -17,7 +17,7 @@ STAGES = ["compile", "scene", "warm-up NBV", "registration", "inflation", "visib
           "path", "outputs"]
 
 
-def _print_case(result, summary, written, compile_seconds):
+def _print_case(result, summary, folder, compile_seconds):
     rows = [("views (warm-up included)", f"{result.n_views}"),
             ("coverage of the oracle set", f"{100 * result.coverage:.2f} %"),
             ("path length", f"{result.path_length:.2f} m (planning frame; "
@@ -33,7 +33,7 @@ def _print_case(result, summary, written, compile_seconds):
     width = max(len(k) for k, _ in rows)
     for key, value in rows:
         print(f"  {key:<{width}}  {value}")
-    print(f"wrote {written['results'].parent}/ (results, plan.csv in the scan frame, plan_normalised.csv, "
+    print(f"wrote {folder}/ (results, plan.csv in the scan frame, plan_normalised.csv, "
           f"plan.json, config.yaml, provenance.json, plan.png, coverage.png, recording.rrd)")
 
 
@@ -57,28 +57,39 @@ def _config(args):
     return config
 
 
-def _run_pair(previous, current, output, config, name="case"):
+def _run_pair(previous, current, output, config, name="case", inputs=(), names=None):
     from tqdm.auto import tqdm
 
     from tpvp.experiments.outputs import write_case_outputs
     from tpvp.experiments.single_plant import build_scene, run_case
+    from tpvp.io.publish import staged_folder
     from tpvp.jit import compile_kernels
 
-    with tqdm(total=len(STAGES), desc="tpvp", unit="stage", leave=False) as bar:
-        def step(stage):
+    with staged_folder(output, inputs=inputs) as stage, \
+            tqdm(total=len(STAGES), desc="tpvp", unit="stage", leave=False, disable=None) as bar:
+        def step(stage_name):
             bar.update(1)
-            bar.set_postfix_str(stage)
+            bar.set_postfix_str(stage_name)
 
         bar.set_postfix_str("compile")
         compile_seconds = compile_kernels()
         step("scene")
-        scene = build_scene(previous, current, config)
+        scene = build_scene(previous, current, config, **({"names": names} if names else {}))
         result = run_case(scene, config, progress=step)
         step("outputs")
-        written = write_case_outputs(output, scene, result, config, name,
+        written = write_case_outputs(stage.folder, scene, result, config, name,
                                      extra_summary={"seconds_compile": compile_seconds})
+        summary = json.loads(written["results"].read_text())
         bar.update(1)
-    _print_case(result, json.loads(written["results"].read_text()), written, compile_seconds)
+    _print_case(result, summary, stage.destination, compile_seconds)
+    reduction = scene.reduction
+    for which in ("previous", "current"):
+        if reduction[f"{which}_points_used"] < reduction[f"{which}_points"]:
+            print(f"note: the {which} scan's {reduction[f'{which}_points']:,} points were reduced to "
+                  f"{reduction[f'{which}_points_used']:,} voxel centroids at "
+                  f"{1e3 * reduction['resolution_m']:g} mm (planning frame) before planning")
+    for warning in result.warnings:
+        print(f"warning: {warning}", file=sys.stderr)
     return 0
 
 
@@ -96,20 +107,27 @@ def _plan(args) -> int:
     from tpvp.io import read_point_cloud
 
     config = _config(args)
-    previous, previous_units = read_point_cloud(args.previous, units=args.units, return_units=True)
-    current, current_units = read_point_cloud(args.current, units=args.units, return_units=True)
+    previous, previous_units = read_point_cloud(args.previous, units=args.units, return_units=True,
+                                                drop_invalid=args.drop_invalid)
+    current, current_units = read_point_cloud(args.current, units=args.units, return_units=True,
+                                              drop_invalid=args.drop_invalid)
     print(f"{args.previous.name}: units: {previous_units}; {args.current.name}: units: {current_units}")
-    return _run_pair(previous, current, args.output, config, name=args.current.name)
+    return _run_pair(previous, current, args.output, config, name=args.current.name,
+                     inputs=(args.previous, args.current), names=(str(args.previous), str(args.current)))
 
 
 def _render(args) -> int:
     from tpvp.experiments.render_demo import RenderDemoConfig, run_render_demo
     from tpvp.io import atomic_write_text
+    from tpvp.io.publish import staged_folder
 
-    out = Path(args.output)
-    table, summary = run_render_demo(RenderDemoConfig(view_space=args.view_space, model=args.model), output=out)
-    atomic_write_text(out / "coverage_per_view.csv", table.to_csv(index=False))
-    atomic_write_text(out / "summary.json", json.dumps(summary, indent=2) + "\n")
+    with staged_folder(args.output) as stage:
+        table, summary = run_render_demo(RenderDemoConfig(view_space=args.view_space, model=args.model),
+                                         output=stage.folder)
+        summary["depth_images"] = [Path(p).name for p in summary.get("depth_images", [])]
+        atomic_write_text(stage.folder / "coverage_per_view.csv", table.to_csv(index=False))
+        atomic_write_text(stage.folder / "summary.json", json.dumps(summary, indent=2) + "\n")
+    out = stage.destination
     print(f"bundled real tomato ({summary['sample']}): {summary['plant_voxels']} plant voxels at 2 mm, "
           f"{summary['table_voxels']} table voxels")
     print(f"oracle visible set over {summary['views']} {args.view_space} views: "
@@ -117,7 +135,8 @@ def _render(args) -> int:
           f"{summary['render_ms_per_view']:.1f} ms/view)")
     print(table[["view", "seen_voxels", "new_voxels", "coverage"]].to_string(
         index=False, formatters={"coverage": "{:.2%}".format}))
-    print(f"wrote {', '.join([str(out / 'coverage_per_view.csv'), str(out / 'summary.json'), *summary['depth_images']])}")
+    names = ["coverage_per_view.csv", "summary.json", *summary["depth_images"]]
+    print(f"wrote {out}/ ({', '.join(names)})")
     return 0
 
 
@@ -184,6 +203,8 @@ def build_parser() -> argparse.ArgumentParser:
     plan.add_argument("--units", default="auto", choices=["auto", "m", "mm"],
                       help="units of the scans; auto: millimetres when the largest extent exceeds 10, and "
                            "says which it chose (default: %(default)s)")
+    plan.add_argument("--drop-invalid", action="store_true",
+                      help="drop points with NaN or infinite coordinates instead of refusing the scan")
     common(plan, "outputs/plan")
     plan.set_defaults(func=_plan)
     render = sub.add_parser("render", help="render the bundled real tomato from every view: coverage per view "
@@ -204,14 +225,16 @@ def build_parser() -> argparse.ArgumentParser:
 
 def run_command(args, name: str) -> int:
     """Run ``args.func(args)``; a TpvpError becomes one line ``<name>: error: ...`` on stderr and
-    exit status 2, Ctrl-C exit status 130 (outputs are written atomically, none is half-written)."""
+    its exit status (2 bad input, 3 destination busy, 4 outputs not written), Ctrl-C one line saying
+    whether the outputs were published and exit status 130 (README: exit codes)."""
     try:
         return args.func(args)
     except TpvpError as exc:
         print(f"{name}: error: {exc}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print(f"{name}: interrupted; outputs are written atomically, none is half-written", file=sys.stderr)
+        return exc.exit_code
+    except KeyboardInterrupt as exc:
+        report = exc.report() if hasattr(exc, "report") else "interrupted before any output was written"
+        print(f"{name}: {report}", file=sys.stderr)
         return 130
 
 

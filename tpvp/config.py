@@ -42,6 +42,10 @@ class SceneConfig:
     radius: view-sphere radius; None keeps the view space's own (0.4 m) in normalised mode and means
     0.4 m around the real plant in native mode. table: None = the view space's choice.
     up_axis: the scan axis that points up; the plant is turned so that it becomes +Z.
+    reduce_above / reduce_resolution: scans with more points are reduced to voxel centroids at
+    ``reduce_resolution`` (planning frame; a quarter of the ground-truth voxel, so the ground truth
+    is unchanged) before anything else. min_plant_voxels: fewer occupied ground-truth voxels than
+    this is not a plant scan (the bundled tomato has 3,890).
     """
 
     largest_side: float = 0.24
@@ -53,9 +57,14 @@ class SceneConfig:
     scale: str = "normalised"
     radius: float | None = None
     up_axis: str = "+z"
+    reduce_above: int = 1_000_000
+    reduce_resolution: float = 0.0005
+    min_plant_voxels: int = 100
 
     def __post_init__(self):
-        _positive(self, "largest_side", "table_size", "table_resolution")
+        _positive(self, "largest_side", "table_size", "table_resolution", "reduce_resolution")
+        _integer(self, "reduce_above", minimum=1)
+        _integer(self, "min_plant_voxels", minimum=1)
         if self.radius is not None:
             _positive(self, "radius")
         if self.centre not in ("bbox", "centroid"):
@@ -86,10 +95,16 @@ class NbvConfig:
 @dataclass(frozen=True)
 class RegistrationConfig:
     """Alignment of the previous session onto the coarse reconstruction. method: a name of
-    :data:`tpvp.registration.REGISTRATION_METHODS`; each method reads its own section."""
+    :data:`tpvp.registration.methods.REGISTRATION_METHODS`; each method reads its own section.
+    warn_chamfer_fraction: warn when the aligned previous session stays farther than this fraction
+    of the plant's size from the coarse scan (Chamfer): a matching pair ends near 0.5 %."""
 
     method: str = "embedded-deformation"
     embedded_deformation: EDConfig = field(default_factory=EDConfig)
+    warn_chamfer_fraction: float = 0.03
+
+    def __post_init__(self):
+        _positive(self, "warn_chamfer_fraction")
 
 
 @dataclass(frozen=True)
@@ -200,6 +215,7 @@ NAMED = {"paper": ("plant", {}), "paper-row": ("row", {})}
 DERIVED = {
     "plant": {
         "scene.table_resolution": ("1 x gt_resolution", lambda c: c["gt_resolution"]),
+        "scene.reduce_resolution": ("gt_resolution / 4 (large scans only)", lambda c: c["gt_resolution"] / 4),
         "registration.embedded_deformation.node_coverage": ("2 x gt_resolution (nricp_resolution_factor)",
                                                             lambda c: 2 * c["gt_resolution"]),
         "registration.embedded_deformation.seed": ("seed", lambda c: c["seed"]),

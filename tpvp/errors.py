@@ -10,6 +10,8 @@ a traceback.
 class TpvpError(Exception):
     """Base class of all errors caused by input the user can fix."""
 
+    exit_code = 2  # the command line's exit status for this error (README: exit codes)
+
 
 class InputFileError(TpvpError, OSError):
     """A file is missing, unreadable, truncated or malformed."""
@@ -21,6 +23,18 @@ class PointCloudError(TpvpError, ValueError):
 
 class ConfigError(TpvpError, ValueError):
     """An argument or configuration value is invalid."""
+
+
+class BusyError(TpvpError):
+    """The destination folder is being written by another run (its lock is held)."""
+
+    exit_code = 3
+
+
+class OutputWriteError(TpvpError, OSError):
+    """Outputs could not be written (disk full, permissions); nothing was published."""
+
+    exit_code = 4
 
 
 class SensorError(TpvpError, ValueError):

@@ -59,6 +59,7 @@ def write_case_outputs(folder, scene, result, config, name: str = "case", extra_
                "initial_view": order[0], "oracle_voxels": int(len(scene.oracle)),
                "scale_planning_per_scan_m": scene.scan_scale,
                "path_length_scan_m": result.path_length / scene.scan_scale,
+               **{f"scan_{k}": v for k, v in (scene.reduction or {}).items()},
                **result.summary(), **(extra_summary or {})}
     atomic_write_text(folder / "results.json", json.dumps(summary, indent=2, default=float) + "\n")
     atomic_write_text(folder / "results.csv", pd.DataFrame([summary]).to_csv(index=False))

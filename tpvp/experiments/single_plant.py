@@ -9,19 +9,19 @@ the current session's ground truth. Every stage's method is chosen by name in th
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from tpvp.config import PlantConfig
-from tpvp.errors import checked_cloud
+from tpvp.errors import PointCloudError, checked_cloud
 from tpvp.inflation import inflate
 from tpvp.nbv.methods import NbvContext, make_nbv
 from tpvp.path.local import local_path_lengths, obstacle_radius, predicted_size
 from tpvp.path.tsp import shortest_open_path
 from tpvp.registration.methods import register
 from tpvp.scene import voxels
-from tpvp.scene.normalise import normalise_plant, up_rotation
+from tpvp.scene.normalise import check_session_pair, normalise_plant, up_rotation
 from tpvp.sensor.grid import build_grid, plant_grid
 from tpvp.setcover.methods import SelectionProblem, select_views
 from tpvp.viewspace import get_view_space
@@ -48,6 +48,8 @@ class Scene:
     oracle: np.ndarray
     plant_from_scan: np.ndarray
     table_points: np.ndarray
+    names: tuple = ("previous-session scan", "current-session scan")
+    reduction: dict | None = None  # points in and used per scan, reduction voxel
 
     @property
     def views(self) -> np.ndarray:
@@ -74,6 +76,7 @@ class CaseResult:
     timings: dict
     clouds: dict  # coarse, previous, warped, inflation, planning (for figures and recordings)
     obstacle: tuple  # (centre, radius) of the path's collision sphere
+    warnings: list = field(default_factory=list)  # plausibility warnings in the user's terms
 
     @property
     def set_cover(self):
@@ -94,19 +97,26 @@ class CaseResult:
             "chamfer_before_mm": 1e3 * self.chamfer_before, "chamfer_after_mm": 1e3 * self.chamfer_after,
             "selection_optimal": bool(self.selection.optimal), "selection_status": self.selection.status,
             **solver, "tsp_optimal": self.tsp.optimal, "tsp_method": self.tsp.method,
+            "warnings": " | ".join(self.warnings),
             **{f"seconds_{k}": v for k, v in self.timings.items()},
         }
 
 
-def build_scene(previous_points, current_points, config: PlantConfig = PlantConfig()) -> Scene:
+def build_scene(previous_points, current_points, config: PlantConfig = PlantConfig(),
+                names=("previous-session scan", "current-session scan")) -> Scene:
     """Bring both sessions into the planning frame defined by the current session (the plant stays
-    in place between sessions) and render the ground truth from every candidate view."""
+    in place between sessions) and render the ground truth from every candidate view.
+
+    ``names`` (e.g. the files) name the scans in errors. Scans of more than
+    ``scene.reduce_above`` points are reduced to voxel centroids at ``scene.reduce_resolution``;
+    the ground truth is built from every point of the current scan, so it does not change."""
     up = up_rotation(config.scene.up_axis)
-    current_scan = checked_cloud(current_points, "current-session scan") @ up.T
-    previous_scan = checked_cloud(previous_points, "previous-session scan") @ up.T
+    current_scan = checked_cloud(current_points, names[1]) @ up.T
+    previous_scan = checked_cloud(previous_points, names[0]) @ up.T
+    check_session_pair(previous_scan, current_scan, names)
     space = get_view_space(config.view_space)
     current = normalise_plant(current_scan, config.scene.largest_side, config.scene.rotation_deg,
-                              centre=config.scene.centre, table=config.uses_table,
+                              centre=config.scene.centre, table=config.uses_table, name=names[1],
                               table_size=config.scene.table_size, table_resolution=config.scene.table_resolution)
     sensor = config.sensor
     if config.scene.scale == "native":
@@ -117,11 +127,25 @@ def build_scene(previous_points, current_points, config: PlantConfig = PlantConf
     elif config.scene.radius is not None:
         space = space.with_radius(config.scene.radius)
     grid = plant_grid(current.points, current.table_points, config.gt_resolution)
+    previous = current.transform(previous_scan)
+    for name, points, count in ((names[0], previous, None), (names[1], current.points, int(grid.countable.sum()))):
+        count = len(voxels.voxelise(points, config.gt_resolution)) if count is None else count
+        if count < config.scene.min_plant_voxels:
+            raise PointCloudError(
+                f"{name}: only {count} occupied {1e3 * config.gt_resolution:g} mm voxels once the plant is "
+                f"scaled to a {config.scene.largest_side:g} m largest side ({len(points)} points); a plant scan "
+                f"has at least {config.scene.min_plant_voxels} - is this the right file?")
+    reduction = {"resolution_m": config.scene.reduce_resolution, "previous_points": len(previous),
+                 "current_points": len(current.points)}
+    previous, current_points = (voxels.voxel_centroids(p, config.scene.reduce_resolution)
+                                if len(p) > config.scene.reduce_above else p
+                                for p in (previous, current.points))
+    reduction.update(previous_points_used=len(previous), current_points_used=len(current_points))
     truth = visibility_matrix(grid, space.positions, space.look_ats, sensor)
     plant_from_scan = current.matrix
     plant_from_scan[:3, :3] = plant_from_scan[:3, :3] @ up
-    return Scene(current.transform(previous_scan), current.points, grid, space, sensor, truth,
-                 oracle_voxels(truth), plant_from_scan, current.table_points)
+    return Scene(previous, current_points, grid, space, sensor, truth, oracle_voxels(truth), plant_from_scan,
+                 current.table_points, names, reduction)
 
 
 def _observation(scene: Scene, view: int) -> np.ndarray:
@@ -151,6 +175,7 @@ def run_case(scene: Scene, config: PlantConfig = PlantConfig(), progress=None) -
     say("registration")
     alignment = register(scene.previous, coarse, config.registration)
     timings["registration"] = time.perf_counter() - t
+    warnings = _registration_warnings(scene, alignment, config)
 
     t = time.perf_counter()
     say("inflation")
@@ -192,5 +217,20 @@ def run_case(scene: Scene, config: PlantConfig = PlantConfig(), progress=None) -
         selection=selection, tsp=tsp, timings=timings,
         clouds={"coarse": np.unique(coarse, axis=0), "previous": scene.previous,
                 "warped": alignment.warped, "inflation": inflated.inflation, "planning": inflated.planning},
-        obstacle=(centre, radius),
+        obstacle=(centre, radius), warnings=warnings,
     )
+
+
+def _registration_warnings(scene: Scene, alignment, config: PlantConfig) -> list:
+    """A registration that ends far from the coarse scan for the plant's size means the two scans
+    are hardly two sessions of one plant; said in the scans' own units."""
+    size = config.scene.largest_side
+    fraction = alignment.chamfer_after / size
+    if fraction <= config.registration.warn_chamfer_fraction:
+        return []
+    per_scan = 1e3 / scene.scan_scale
+    return [f"registration of {scene.names[0]} onto the coarse scan of {scene.names[1]} ends at "
+            f"{alignment.chamfer_after * per_scan:.3g} mm Chamfer ({100 * fraction:.1f} % of the plant's "
+            f"{size * per_scan:.3g} mm; a matching pair of sessions ends below "
+            f"{100 * config.registration.warn_chamfer_fraction:g} %): are these two sessions of the same "
+            f"plant? The plan relies on the aligned previous session"]

@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Iterator
 
 from tpvp.errors import InputFileError
+from tpvp.io import faults
 
 __all__ = ["atomic_path", "atomic_write_bytes", "atomic_write_text"]
 
@@ -71,8 +72,11 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     os.close(fd)
     try:
         yield tmp
-    except BaseException:
+        faults.checkpoint("write")
+    except BaseException as exc:
         _remove_quietly(tmp)
+        if isinstance(exc, OSError) and not isinstance(exc, InputFileError):
+            raise InputFileError(f"cannot write {path}: {exc.strerror or exc}") from exc
         raise
     if not tmp.exists():
         raise InputFileError(f"cannot write {path}: the temporary file {tmp.name} disappeared")
@@ -96,6 +100,7 @@ def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> Path:
             fh.write(data)
             fh.flush()
             os.fsync(fh.fileno())
+        faults.checkpoint("write")
     except BaseException as exc:
         _remove_quietly(tmp)
         if isinstance(exc, OSError):

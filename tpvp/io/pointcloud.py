@@ -14,19 +14,26 @@ reported with a warning. After conversion a cloud larger than 100 m, or (for an 
 what ``"auto"`` chose, ask ``read_point_cloud(..., return_units=True)`` (or :func:`unit_choice` on a
 raw array) for a :class:`UnitChoice`; ``str()`` of it reads ``auto -> mm (largest extent 230 mm)``.
 
+Only regular files are read: a directory, FIFO (which would block), device (which would never
+end) or socket, a missing file, a broken or looping symlink are refused before anything opens
+them. Declared sizes are checked against the file before anything is allocated, and data beyond
+what a header declares (PLY, binary PCD) is refused rather than dropped without a word.
+
 Every format can be read gzip-compressed (``scan.ply.gz``, ``scan.xyz.gz``, ``mesh.obj.gz``, ...):
 the file is decompressed in memory and parsed like the plain file, errors still name it.
 """
 
 from __future__ import annotations
 
+import errno
 import gzip
 import io
 import logging
-import zlib
 import os
 import re
+import stat
 import warnings
+import zlib
 from pathlib import Path
 from typing import NamedTuple
 
@@ -206,16 +213,112 @@ def _gunzip(path: Path, data: bytes) -> bytes:
     return out
 
 
-def _read_bytes(path: Path) -> bytes:
-    """The file's bytes, decompressed when its name ends in ``.gz``."""
+_FILE_KINDS = (
+    (stat.S_ISDIR, "is a directory"),
+    (stat.S_ISFIFO, "is a FIFO (named pipe)"),
+    (stat.S_ISCHR, "is a character device"),
+    (stat.S_ISBLK, "is a block device"),
+    (stat.S_ISSOCK, "is a socket"),
+)
+
+
+def _not_a_file(path: Path, mode: int) -> str | None:
+    """Why ``mode`` is not a regular file (``"is a FIFO (named pipe), not a file"``), or None."""
+    if stat.S_ISREG(mode):
+        return None
+    what = next((w for test, w in _FILE_KINDS if test(mode)), "is not a regular file")
+    why = f"{what}, not a file" if what != "is not a regular file" else what
+    if os.path.islink(path):
+        try:
+            why += f" (it is a symlink to {os.path.realpath(path)})"
+        except (OSError, ValueError):
+            why += " (it is a symlink)"
+    return why
+
+
+def _stat_problem(path: Path, exc: OSError) -> str:
+    """One line saying why ``os.stat(path)`` failed: missing, broken or looping symlink, ..."""
+    code = exc.errno
+    if code == errno.ELOOP:
+        return f"{path}: symlink loop (following its links never reaches a file)"
+    if code == errno.ENOENT:
+        if os.path.islink(path):
+            try:
+                target = os.readlink(path)
+                final = os.path.realpath(path)
+            except (OSError, ValueError):
+                return f"{path}: broken symlink (its target does not exist)"
+            if os.path.lexists(os.path.join(path.parent, target)):  # a chain of links
+                return (f"{path}: broken symlink pointing to {target}, which leads to "
+                        f"{final} (which does not exist)")
+            return f"{path}: broken symlink pointing to {target} (which does not exist)"
+        missing = None  # the outermost missing folder
+        for folder in path.parents:
+            if os.path.lexists(folder):
+                break
+            missing = folder
+        if missing is not None:
+            return f"{path}: file not found (folder {missing} does not exist)"
+        return f"{path}: file not found"
+    if code == errno.ENOTDIR:
+        blocker = next((a for a in reversed(path.parents)
+                        if os.path.lexists(a) and not os.path.isdir(a)), None)
+        if blocker is not None:
+            return f"{path}: file not found ({blocker} is a file, not a folder)"
+        return f"{path}: file not found (a part of the path is not a folder)"
+    if code in (errno.EACCES, errno.EPERM):
+        return f"{path}: permission denied (cannot look into one of its folders)"
+    if code == errno.ENAMETOOLONG:
+        return f"{path}: file name too long"
+    return f"{path}: cannot read: {exc.strerror or exc}"
+
+
+def _stat_input(path: Path) -> os.stat_result:
+    """``os.stat`` of an input file (symlinks followed), checked BEFORE anything opens it: a
+    missing path, a broken or looping symlink, a directory, FIFO, device or socket, or an empty
+    file raises :class:`InputFileError` with one line saying which."""
     try:
-        data = path.read_bytes()
-    except FileNotFoundError:
-        raise InputFileError(f"{path}: file not found") from None
-    except IsADirectoryError:
-        raise InputFileError(f"{path}: is a directory, not a file") from None
+        st = os.stat(path)
+    except ValueError:  # an embedded NUL byte
+        raise InputFileError(f"{str(path)!r}: the file name contains a NUL byte") from None
     except OSError as exc:
-        raise InputFileError(f"{path}: cannot read: {exc.strerror or exc}") from None
+        raise InputFileError(_stat_problem(path, exc)) from None
+    why = _not_a_file(path, st.st_mode)
+    if why is not None:
+        raise InputFileError(f"{path}: {why}")
+    if st.st_size == 0:
+        raise InputFileError(f"{path}: empty file (0 bytes)")
+    return st
+
+
+def _open_problem(path: Path, exc: OSError) -> str:
+    if exc.errno in (errno.EACCES, errno.EPERM):
+        return f"{path}: permission denied (cannot read it)"
+    if exc.errno == errno.EISDIR:
+        return f"{path}: is a directory, not a file"
+    return f"{path}: cannot read: {exc.strerror or exc}"
+
+
+def _read_bytes(path: Path) -> bytes:
+    """The file's bytes, decompressed when its name ends in ``.gz``. Only regular files are
+    read: the file is checked before it is opened (a FIFO would block, a device never end), and
+    opened without blocking and checked again in case it was swapped in between."""
+    _stat_input(path)
+    try:
+        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0)
+                     | getattr(os, "O_BINARY", 0))
+    except OSError as exc:
+        raise InputFileError(_open_problem(path, exc)) from None
+    try:
+        with os.fdopen(fd, "rb") as f:
+            why = _not_a_file(path, os.fstat(f.fileno()).st_mode)
+            if why is not None:
+                raise InputFileError(f"{path}: {why}")
+            data = f.read()
+    except OSError as exc:
+        if isinstance(exc, InputFileError):
+            raise
+        raise InputFileError(_open_problem(path, exc)) from None
     if not data:
         raise InputFileError(f"{path}: empty file (0 bytes)")
     if _is_gzip(path):
@@ -224,12 +327,25 @@ def _read_bytes(path: Path) -> bytes:
 
 
 def _check_file(path: Path) -> None:
-    if not path.exists():
-        raise InputFileError(f"{path}: file not found")
-    if not path.is_file():
-        raise InputFileError(f"{path}: is not a regular file")
-    if path.stat().st_size == 0:
-        raise InputFileError(f"{path}: empty file (0 bytes)")
+    _stat_input(path)
+
+
+_BOM_UTF8 = b"\xef\xbb\xbf"
+
+
+def _check_not_utf16(path, data: bytes) -> None:
+    """Refuse UTF-16 text (Windows tools write it): every second byte is NUL."""
+    head = data[:64]
+    bom = head[:2] in (b"\xff\xfe", b"\xfe\xff")
+    if len(head) >= 4 and not bom:
+        even, odd = head[0::2], head[1::2]
+        pattern = (odd.count(0) == len(odd) and 0 not in even) or \
+                  (even.count(0) == len(even) and 0 not in odd)
+    else:
+        pattern = False
+    if bom or pattern:
+        raise InputFileError(f"{path}: is UTF-16 encoded text; save it as UTF-8 or ASCII "
+                             f"(e.g. iconv -f UTF-16 -t UTF-8)")
 
 
 def _unique(names: list[str]) -> list[str]:
@@ -320,6 +436,7 @@ def _locate_text_error(path, body: str, delim, first_lineno: int, exc: Exception
 
 
 def _decode(path, data: bytes) -> str:
+    _check_not_utf16(path, data)
     if b"\x00" in data[:4096]:
         raise InputFileError(f"{path}: contains binary data, expected a text table")
     try:
@@ -437,6 +554,23 @@ def _read_text_cloud(path: Path, return_labels: bool):
 
 
 # --------------------------------------------------------------------------------------------
+# binary payload sizes
+
+#: Bytes a writer may leave after binary data (a final newline, NUL padding).
+_PADDING = b" \t\r\n\x00"
+
+
+def _check_trailing(path, tail: bytes, row_size: int, declared: str, worth: str) -> None:
+    """Refuse bytes after all declared binary data: the header undercounts (the rest would be
+    dropped without a word) or the file is damaged. Less than one row of whitespace or NUL
+    padding (a trailing newline) is accepted."""
+    if not tail or (len(tail) < max(row_size, 1) and not tail.strip(_PADDING)):
+        return
+    raise InputFileError(f"{path}: {declared} but the file holds {len(tail):,} more bytes after "
+                         f"them ({worth})")
+
+
+# --------------------------------------------------------------------------------------------
 # PLY
 
 _PLY_TYPES = {
@@ -472,6 +606,7 @@ def _ply_type(path, word: str, lineno: int) -> str:
 def _parse_ply_header(path, data: bytes):
     """Return (format, elements, payload offset, header line count)."""
     if not data.startswith(b"ply"):
+        _check_not_utf16(path, data)
         raise InputFileError(f"{path}: not a PLY file (does not start with 'ply')")
     pos, lineno, fmt, elements = 0, 0, None, []
     while True:
@@ -485,8 +620,10 @@ def _parse_ply_header(path, data: bytes):
             line = None
         if line == "end_header":
             break
-        if line is None or (nl < 0 and not line):
-            raise InputFileError(f"{path}: PLY header has no 'end_header' line")
+        if line is None or nl < 0:
+            raise InputFileError(f"{path}: PLY header has no 'end_header' line (the file ends "
+                                 f"inside the header, at line {lineno})" if line is not None else
+                                 f"{path}: PLY header has no 'end_header' line")
         words = line.split()
         key = words[0] if words else ""
         bad = False
@@ -533,6 +670,8 @@ def _parse_ply_header(path, data: bytes):
 
 
 def _ply_first_row_counts(data: bytes, offset: int, elem: _Element, endian: str):
+    """The list lengths of the element's first row (an empty row walk stops at the file's end:
+    None), to guess a fixed row layout."""
     counts, off = [], offset
     for p in elem.props:
         if p.count_type is None:
@@ -545,6 +684,17 @@ def _ply_first_row_counts(data: bytes, offset: int, elem: _Element, endian: str)
         counts.append(max(k, 0))
         off += cdt.itemsize + max(k, 0) * np.dtype(p.type).itemsize
     return counts
+
+
+def _ply_row_size(elem: _Element, counts=()) -> int:
+    """Bytes of one row whose lists have the lengths ``counts`` (Python integers: no overflow)."""
+    size, it = 0, iter(counts)
+    for p in elem.props:
+        if p.count_type is None:
+            size += np.dtype(p.type).itemsize
+        else:
+            size += np.dtype(p.count_type).itemsize + next(it, 0) * np.dtype(p.type).itemsize
+    return size
 
 
 def _ply_row_dtype(elem: _Element, endian: str, counts=()) -> np.dtype:
@@ -560,25 +710,65 @@ def _ply_row_dtype(elem: _Element, endian: str, counts=()) -> np.dtype:
     return np.dtype(fields)
 
 
-def _ply_walk(path, data: bytes, offset: int, elem: _Element, endian: str) -> int:
-    # Variable-length lists (e.g. mixed triangles and quads) before the vertices need a
-    # row-by-row walk to find where the vertices start; rare, so a plain loop is acceptable.
-    byteorder = "little" if endian == "<" else "big"
-    plan = [(np.dtype(p.type).itemsize,
-             None if p.count_type is None else np.dtype(p.count_type)) for p in elem.props]
-    off, n = offset, len(data)
-    for row in range(elem.count):
-        for size, cdt in plan:
-            if cdt is None:
-                off += size
+def _ply_walk_kernel(buf, off, rows, sizes, csizes, signed, big):
+    """End offset of ``rows`` rows from ``off`` (-(row + 1) when the data ends inside a row).
+    Property i is a scalar of ``sizes[i]`` bytes (``csizes[i] == 0``) or a list: a count of
+    ``csizes[i]`` bytes (at most 4), then that many items of ``sizes[i]`` bytes."""
+    n = buf.shape[0]
+    for r in range(rows):
+        for i in range(sizes.shape[0]):
+            cs = csizes[i]
+            if cs == 0:
+                off += sizes[i]
             else:
-                k = int.from_bytes(data[off:off + cdt.itemsize], byteorder, signed=cdt.kind == "i")
-                off += cdt.itemsize + max(k, 0) * size
-        if off > n:
-            raise InputFileError(
-                f"{path}: truncated: header declares {elem.count} '{elem.name}' rows before "
-                f"the vertices, file ends inside row {row + 1}")
+                if off + cs > n:
+                    return -(r + 1)
+                k = np.int64(0)
+                for b in range(cs):
+                    shift = 8 * (cs - 1 - b) if big else 8 * b
+                    k += np.int64(buf[off + b]) << shift
+                if signed[i] and k >= (np.int64(1) << (8 * cs - 1)):
+                    k -= np.int64(1) << (8 * cs)
+                off += cs + max(k, 0) * sizes[i]
+            if off > n:
+                return -(r + 1)
     return off
+
+
+_walk_impl = None
+
+
+def _ply_walk(path, data: bytes, offset: int, elem: _Element, endian: str) -> int:
+    # Variable-length lists (e.g. mixed triangles and quads) need a row-by-row walk to find
+    # where the element ends; compiled with numba (lazily, like the LZF decoder) when available.
+    global _walk_impl
+    sizes = np.array([np.dtype(p.type).itemsize for p in elem.props], dtype=np.int64)
+    csizes = np.array([0 if p.count_type is None else np.dtype(p.count_type).itemsize
+                       for p in elem.props], dtype=np.int64)
+    signed = np.array([p.count_type is not None and np.dtype(p.count_type).kind == "i"
+                       for p in elem.props], dtype=np.bool_)
+    # Every row takes at least its scalars and list counts: refuse a huge count at once.
+    least = int(sum(sz for sz, cs in zip(sizes, csizes) if cs == 0) + csizes.sum())
+    avail = len(data) - offset
+    if elem.count * least > avail:
+        raise InputFileError(
+            f"{path}: truncated: header declares {elem.count:,} '{elem.name}' rows of at least "
+            f"{least} byte{'s' if least != 1 else ''} each, the file holds {avail:,} bytes for "
+            f"them")
+    if _walk_impl is None:
+        try:  # imported lazily: numba costs ~1 s and only mixed-length lists need it
+            import numba
+
+            _walk_impl = numba.njit(cache=True, nogil=True)(_ply_walk_kernel)
+        except Exception:  # pragma: no cover - numba missing or unusable
+            _walk_impl = _ply_walk_kernel
+    end = int(_walk_impl(np.frombuffer(data, np.uint8), np.int64(offset), np.int64(elem.count),
+                         sizes, csizes, signed, endian == ">"))
+    if end < 0:
+        raise InputFileError(
+            f"{path}: truncated: header declares {elem.count:,} '{elem.name}' rows, file ends "
+            f"inside row {-end:,}")
+    return end
 
 
 def _ply_binary_block(path, data: bytes, offset: int, elem: _Element, endian: str, is_vertex: bool):
@@ -587,22 +777,65 @@ def _ply_binary_block(path, data: bytes, offset: int, elem: _Element, endian: st
     counts = _ply_first_row_counts(data, offset, elem, endian) if (nlists and elem.count) else None
     if counts is None:
         counts = [0] * nlists
-    dt = _ply_row_dtype(elem, endian, counts)
+    row = _ply_row_size(elem, counts)
+    if row == 0:  # an element without properties takes no bytes, however many rows
+        return None, offset
     avail = len(data) - offset
-    fits = avail >= elem.count * dt.itemsize
+    fits = avail >= elem.count * row  # Python integers: a huge count builds no array
     if fits:
-        arr = np.frombuffer(data, dt, elem.count, offset)
-        uniform = all((arr[f"__count{i}"] == k).all() for i, k in
-                      zip([i for i, p in enumerate(elem.props) if p.count_type], counts))
-        if uniform:
-            return arr, offset + elem.count * dt.itemsize
+        try:
+            dt = _ply_row_dtype(elem, endian, counts)
+        except ValueError:  # a list too long for numpy's shape limits
+            dt = None
+        if dt is not None:
+            arr = np.frombuffer(data, dt, elem.count, offset)
+            uniform = all((arr[f"__count{i}"] == k).all() for i, k in
+                          zip([i for i, p in enumerate(elem.props) if p.count_type], counts))
+            if uniform:
+                return arr, offset + elem.count * row
     if not is_vertex:
         return None, _ply_walk(path, data, offset, elem, endian)
     if not fits:
-        holds = avail // dt.itemsize if dt.itemsize else 0
+        holds = avail // row
+        lists = " (with the first row's list lengths)" if nlists else ""
         raise InputFileError(
-            f"{path}: truncated: header declares {elem.count} vertices, file holds {holds}")
+            f"{path}: truncated: header declares {elem.count} vertices, file holds {holds}"
+            f"{lists}")
     raise InputFileError(f"{path}: vertex list properties of varying length are not supported")
+
+
+def _rows(elements) -> str:
+    return ", ".join(f"{e.count:,} '{e.name}' rows" for e in elements)
+
+
+def _ply_binary_end(path, data: bytes, offset: int, elements, vi: int, endian: str,
+                    vrow: int) -> None:
+    """Walk the elements after the vertices (``offset``: where they start; ``vrow``: bytes per
+    vertex) and refuse a file that ends inside them or holds bytes after them."""
+    vertex = elements[vi]
+    vbytes = vertex.count * vrow
+    end = offset
+    for elem in elements[vi + 1:]:
+        _, end = _ply_binary_block(path, data, end, elem, endian, is_vertex=False)
+    after = elements[vi + 1:]
+    if after:
+        declared = (f"header declares {vertex.count:,} vertices and {_rows(after)} after them "
+                    f"(data ends at byte {end:,})")
+        worth = "is an element count in the header wrong?"
+    else:
+        declared = f"header declares {vertex.count:,} vertices ({vbytes:,} bytes of data)"
+        worth = (f"{(len(data) - end) / vrow:.3g} vertices' worth; is the 'element vertex' "
+                 f"count wrong?")
+    _check_trailing(path, data[end:], vrow, declared, worth)
+
+
+def _nonblank_lines(buf: np.ndarray) -> int:
+    """Lines of ``buf`` (uint8) holding anything but whitespace."""
+    if not len(buf):
+        return 0
+    ink = ~np.isin(buf, np.frombuffer(b" \t\r\n\x0b\x0c", np.uint8))
+    line = np.cumsum(buf == 10)[ink]
+    return 0 if not len(line) else 1 + int(np.count_nonzero(np.diff(line)))
 
 
 def _ply_vertex_columns(path, elem: _Element):
@@ -660,6 +893,7 @@ def _ply_ascii_vertices(path, data, offset, header_lines, elements, vi, idx, lab
     if len(arr) != elem.count:
         raise InputFileError(f"{path}: expected {elem.count} vertex lines from line {first_line}, "
                              f"found {len(arr)} (blank lines inside the data?)")
+    _ply_ascii_end(path, buf[end:], elements, vi)
     # Column of each property; lists take 1 + length columns, equal in every row.
     col, cols = 0, []
     for p in elem.props:
@@ -681,8 +915,31 @@ def _ply_ascii_vertices(path, data, offset, header_lines, elements, vi, idx, lab
     return pts, labels
 
 
+def _ply_ascii_end(path, tail: np.ndarray, elements, vi: int) -> None:
+    """``tail``: the bytes after the vertex lines. Refuse a file with fewer or more non-blank
+    lines after the vertices than the header declares (one line per row in ASCII PLY)."""
+    after = elements[vi + 1:]
+    expected = sum(e.count for e in after)
+    have = _nonblank_lines(tail)
+    if have < expected:
+        raise InputFileError(f"{path}: truncated: header declares {_rows(after)} after the "
+                             f"vertices ({expected:,} lines), the file holds {have:,}")
+    if have > expected:
+        n = elements[vi].count
+        if not after:
+            raise InputFileError(
+                f"{path}: header declares {n:,} vertices, the file holds {n + have:,} vertex "
+                f"lines ({have:,} more than declared); is the 'element vertex' count wrong?")
+        raise InputFileError(
+            f"{path}: header declares {n:,} vertices and {_rows(after)} after them, the file "
+            f"holds {have:,} lines after the vertices ({have - expected:,} more than declared); "
+            f"is an element count in the header wrong?")
+
+
 def _read_ply(path: Path, return_labels: bool):
     data = _read_bytes(path)
+    if data.startswith(_BOM_UTF8):
+        data = data[len(_BOM_UTF8):]
     fmt, elements, offset, header_lines = _parse_ply_header(path, data)
     vi = next((i for i, e in enumerate(elements) if e.name == "vertex"), None)
     if vi is None:
@@ -696,7 +953,8 @@ def _read_ply(path: Path, return_labels: bool):
     endian = "<" if fmt == "binary_little_endian" else ">"
     for elem in elements[:vi]:
         _, offset = _ply_binary_block(path, data, offset, elem, endian, is_vertex=False)
-    arr, _ = _ply_binary_block(path, data, offset, vertex, endian, is_vertex=True)
+    arr, vend = _ply_binary_block(path, data, offset, vertex, endian, is_vertex=True)
+    _ply_binary_end(path, data, vend, elements, vi, endian, arr.dtype.itemsize)
     names = _unique([p.name for p in vertex.props])
     pts = np.empty((vertex.count, 3), dtype=np.float64)
     for j, i in enumerate(idx):
@@ -718,7 +976,8 @@ _PCD_KEYS = ("VERSION", "FIELDS", "COLUMNS", "SIZE", "TYPE", "COUNT", "WIDTH", "
 
 
 def _parse_pcd_header(path, data: bytes):
-    pos, lineno, hdr = 0, 0, {}
+    """Return (header: key -> words, payload offset, header line count, key -> line number)."""
+    pos, lineno, hdr, where = 0, 0, {}, {}
     while True:
         if pos >= len(data):
             raise InputFileError(f"{path}: PCD header has no DATA line")
@@ -739,38 +998,82 @@ def _parse_pcd_header(path, data: bytes):
         if key not in _PCD_KEYS:
             raise InputFileError(f"{path}: PCD header line {lineno} is not a header line "
                                  f"({line[:40]!r}); is the DATA line missing?")
+        if key in where:
+            raise InputFileError(f"{path}: PCD header gives {key} twice (lines {where[key]} "
+                                 f"and {lineno})")
         hdr[key] = words[1:]
+        where[key] = lineno
         if key == "DATA":
-            return hdr, pos, lineno
+            return hdr, pos, lineno, where
 
 
-def _pcd_ints(path, hdr, key, n=None):
+def _pcd_ints(path, hdr, key, n=None, where=None):
     vals = hdr.get(key)
     if vals is None:
         return None
-    if not all(re.fullmatch(r"\d+", v) for v in vals) or (n is not None and len(vals) != n):
-        raise InputFileError(f"{path}: malformed PCD {key} line: {' '.join(vals)!r}")
+    at = f"line {where[key]}: " if where and key in where else ""
+    if not vals or not all(re.fullmatch(r"\d+", v) for v in vals):
+        raise InputFileError(f"{path}: {at}malformed PCD {key} line {' '.join([key, *vals])!r} "
+                             f"(expected {'whole numbers' if n != 1 else 'one whole number'})")
+    if n is not None and len(vals) != n:
+        raise InputFileError(f"{path}: {at}PCD {key} line lists {len(vals)} values, "
+                             f"expected {n}: {' '.join([key, *vals])!r}")
     return [int(v) for v in vals]
 
 
-def _pcd_fields(path, hdr):
-    names = hdr.get("FIELDS") or hdr.get("COLUMNS")
-    if not names:
+def _pcd_field_count_problem(path, hdr, where) -> str | None:
+    """FIELDS, SIZE, TYPE and COUNT must list as many entries each; name the line(s) that do not
+    (the odd one out against the others' majority), with its line number."""
+    keys = [k for k in ("FIELDS" if "FIELDS" in hdr else "COLUMNS", "SIZE", "TYPE", "COUNT")
+            if k in hdr]
+    lengths = {k: len(hdr[k]) for k in keys}
+    if len(set(lengths.values())) <= 1:
+        return None
+
+    def entry(k):
+        shown = " ".join(hdr[k]) if len(hdr[k]) <= 12 else " ".join(hdr[k][:12]) + " ..."
+        return f"{k} (line {where[k]}) lists {lengths[k]} ({shown})"
+
+    tally: dict[int, list[str]] = {}
+    for k in keys:
+        tally.setdefault(lengths[k], []).append(k)
+    ranked = sorted(tally.items(), key=lambda kv: -len(kv[1]))
+    if len(ranked[0][1]) > len(ranked[1][1]):  # a strict majority: the others are the culprits
+        common, agree = ranked[0]
+        odd = [k for k in keys if lengths[k] != common]
+        others = ", ".join(f"{k} (line {where[k]})" for k in agree)
+        return (f"{path}: PCD {'; '.join(entry(k) for k in odd)}, but {others} "
+                f"list{'s' if len(agree) == 1 else ''} {common}; "
+                f"FIELDS, SIZE, TYPE and COUNT need one entry per field")
+    return (f"{path}: PCD header lines disagree on the number of fields: "
+            f"{'; '.join(entry(k) for k in keys)}")
+
+
+def _pcd_fields(path, hdr, where=None):
+    where = where or {}
+    key = "FIELDS" if "FIELDS" in hdr else "COLUMNS"
+    if key not in hdr:
         raise InputFileError(f"{path}: PCD header has no FIELDS line")
+    names = hdr[key]
+    if not names:
+        raise InputFileError(f"{path}: line {where.get(key, '?')}: PCD {key} line names no fields")
+    for k in ("SIZE", "TYPE"):
+        if k not in hdr:
+            raise InputFileError(f"{path}: PCD header has no {k} line")
+    problem = _pcd_field_count_problem(path, hdr, where)
+    if problem:
+        raise InputFileError(problem)
     n = len(names)
-    for key in ("SIZE", "TYPE"):
-        if key not in hdr:
-            raise InputFileError(f"{path}: PCD header has no {key} line")
-    sizes = _pcd_ints(path, hdr, "SIZE", n)
-    counts = _pcd_ints(path, hdr, "COUNT", n) or [1] * n
+    sizes = _pcd_ints(path, hdr, "SIZE", n, where)
+    counts = _pcd_ints(path, hdr, "COUNT", n, where) or [1] * n
     types = [t.upper() for t in hdr["TYPE"]]
-    if len(types) != n:
-        raise InputFileError(f"{path}: PCD TYPE lists {len(types)} entries for {n} FIELDS")
     codes = []
-    for name, t, s in zip(names, types, sizes):
-        code = _PCD_TYPES.get((t, s))
+    for name, t, sz in zip(names, types, sizes):
+        code = _PCD_TYPES.get((t, sz))
         if code is None:
-            raise InputFileError(f"{path}: unknown PCD type/size '{t} {s}' for field '{name}'")
+            at = f"line {where['TYPE']}: " if "TYPE" in where else ""
+            raise InputFileError(f"{path}: {at}unknown PCD type/size '{t} {sz}' for field "
+                                 f"'{name}' (known: F 2/4/8, I 1/2/4/8, U 1/2/4/8)")
         codes.append(code)
     return list(names), _unique(list(names)), codes, counts
 
@@ -811,6 +1114,8 @@ def _lzf_kernel(src, out):
 
 
 _lzf_impl = None
+#: LZF expands at most ~88 times (a 3-byte back reference copies up to 264 bytes).
+_LZF_MAX_RATIO = 90
 
 
 def _lzf_decompress(payload: bytes, size: int) -> np.ndarray | None:
@@ -829,11 +1134,14 @@ def _lzf_decompress(payload: bytes, size: int) -> np.ndarray | None:
 
 def _read_pcd(path: Path, return_labels: bool):
     data = _read_bytes(path)
-    hdr, offset, header_lines = _parse_pcd_header(path, data)
-    names, keys, codes, counts = _pcd_fields(path, hdr)
-    width = _pcd_ints(path, hdr, "WIDTH", 1)
-    height = _pcd_ints(path, hdr, "HEIGHT", 1)
-    points = _pcd_ints(path, hdr, "POINTS", 1)
+    if data.startswith(_BOM_UTF8):
+        data = data[len(_BOM_UTF8):]
+    _check_not_utf16(path, data)
+    hdr, offset, header_lines, where = _parse_pcd_header(path, data)
+    names, keys, codes, counts = _pcd_fields(path, hdr, where)
+    width = _pcd_ints(path, hdr, "WIDTH", 1, where)
+    height = _pcd_ints(path, hdr, "HEIGHT", 1, where)
+    points = _pcd_ints(path, hdr, "POINTS", 1, where)
     if points is None and width is None:
         raise InputFileError(f"{path}: PCD header has neither POINTS nor WIDTH")
     n = points[0] if points else width[0] * (height[0] if height else 1)
@@ -861,10 +1169,13 @@ def _read_pcd(path: Path, return_labels: bool):
     wanted = idx + ([lab] if lab is not None and return_labels else [])
     if mode == "ascii":
         block = data[offset:].decode("latin-1")
-        try:
-            arr = np.loadtxt(io.StringIO(block), dtype=np.float64, comments="#", ndmin=2)
-        except ValueError as exc:
-            raise InputFileError(_locate_text_error(path, block, None, header_lines + 1, exc)) from None
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)  # "input contained no data"
+            try:
+                arr = np.loadtxt(io.StringIO(block), dtype=np.float64, comments="#", ndmin=2)
+            except ValueError as exc:
+                raise InputFileError(
+                    _locate_text_error(path, block, None, header_lines + 1, exc)) from None
         width_total = sum(counts)
         if len(arr) < n:
             raise InputFileError(f"{path}: truncated: header declares {n} points, file holds {len(arr)}")
@@ -877,12 +1188,26 @@ def _read_pcd(path: Path, return_labels: bool):
         for i in wanted:
             cols[i] = _as_declared(arr[:, starts[i]][:, None], [codes[i]])[:, 0]
     elif mode == "binary":
-        dt = np.dtype([(k, "<" + c) if cnt == 1 else (k, "<" + c, (cnt,))
-                       for k, c, cnt in zip(keys, codes, counts)])
+        # Sizes in Python integers first: a huge POINTS or COUNT must not build a dtype or array.
+        row = sum(np.dtype(c).itemsize * cnt for c, cnt in zip(codes, counts))
         avail = len(data) - offset
-        if avail < n * dt.itemsize:
-            raise InputFileError(f"{path}: truncated: header declares {n} points, "
-                                 f"file holds {avail // dt.itemsize}")
+        if row > avail and max(counts) > 1:
+            big = max(range(len(counts)), key=counts.__getitem__)
+            raise InputFileError(
+                f"{path}: line {where.get('COUNT', '?')}: PCD COUNT {counts[big]:,} for field "
+                f"'{names[big]}' makes one point {row:,} bytes, more than the file holds "
+                f"({avail:,} bytes of data)")
+        if avail < n * row:
+            raise InputFileError(f"{path}: truncated: header declares {n} points of {row} bytes, "
+                                 f"file holds {avail // row if row else 0}")
+        _check_trailing(path, data[offset + n * row:], row,
+                        f"header declares {n:,} points ({n * row:,} bytes of data)",
+                        f"{(avail - n * row) / row:.3g} points' worth; is POINTS wrong?")
+        try:
+            dt = np.dtype([(k, "<" + c) if cnt == 1 else (k, "<" + c, (cnt,))
+                           for k, c, cnt in zip(keys, codes, counts)])
+        except ValueError as exc:
+            raise InputFileError(f"{path}: PCD COUNT values are too large for a row: {exc}") from None
         arr = np.frombuffer(data, dt, n, offset)
         for i in wanted:
             cols[i] = arr[keys[i]]
@@ -895,6 +1220,10 @@ def _read_pcd(path: Path, return_labels: bool):
             raise InputFileError(f"{path}: truncated: compressed block declares {csize} bytes, "
                                  f"file holds {len(payload)}")
         sizes = [np.dtype(c).itemsize * cnt for c, cnt in zip(codes, counts)]
+        if usize > _LZF_MAX_RATIO * csize + 64:
+            raise InputFileError(f"{path}: corrupt binary_compressed block: {csize:,} compressed "
+                                 f"bytes cannot unpack to the declared {usize:,} (LZF expands at "
+                                 f"most ~88 times)")
         if usize != n * sum(sizes):
             raise InputFileError(f"{path}: compressed block unpacks to {usize} bytes, "
                                  f"{n} points need {n * sum(sizes)}")
@@ -956,9 +1285,11 @@ def _drop_nonfinite(path, pts, labels, drop_invalid):
         return pts, labels
     if not drop_invalid:
         first = int(np.flatnonzero(bad)[0])
-        raise PointCloudError(f"{path}: {nbad} of {len(pts)} points have NaN/inf coordinates "
-                              f"(first: point {first + 1}); pass drop_invalid=True to drop them")
-    warnings.warn(f"{path}: dropped {nbad} of {len(pts)} points with NaN/inf coordinates",
+        raise PointCloudError(
+            f"{path}: {nbad:,} of {len(pts):,} points have NaN/inf coordinates "
+            f"(first at point {first + 1:,}); remove them, or pass --drop-invalid (tpvp plan) / "
+            f"drop_invalid=True (tpvp.io.read_point_cloud)")
+    warnings.warn(f"{path}: dropped {nbad:,} of {len(pts):,} points with NaN/inf coordinates",
                   stacklevel=3)
     keep = ~bad
     return pts[keep], (labels[keep] if labels is not None else None)
@@ -987,8 +1318,7 @@ def read_point_cloud(path, units: str = "auto", return_labels: bool = False, *,
             or mesh_samples < 1:
         raise ConfigError(f"mesh_samples must be a positive integer, got {mesh_samples!r}")
     path = Path(path)
-    if not path.exists():
-        raise InputFileError(f"{path}: file not found")
+    _stat_input(path)  # before anything opens it: a FIFO would block, a device never end
     ext, compressed = cloud_extension(path)
     if ext == ".ply":
         pts, labels = _read_ply(path, return_labels)

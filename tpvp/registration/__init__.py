@@ -5,8 +5,6 @@ from tpvp.registration.embedded_deformation import (
     RegistrationResult,
     axis_angle_to_matrix,
     register_embedded_deformation,
-    voxel_centroids,
 )
 
-__all__ = ["EDConfig", "RegistrationResult", "axis_angle_to_matrix", "register_embedded_deformation",
-           "voxel_centroids"]
+__all__ = ["EDConfig", "RegistrationResult", "axis_angle_to_matrix", "register_embedded_deformation"]

@@ -49,6 +49,29 @@ def _rotate_z(points: np.ndarray, degrees: float) -> np.ndarray:
     return points @ rot.T
 
 
+# Two sessions of one plant differ in size by growth, not by this factor: beyond it the units differ.
+UNIT_RATIO = 20.0
+
+
+def check_session_pair(previous: np.ndarray, current: np.ndarray, names=("previous", "current")) -> None:
+    """Refuse two scans that cannot be sessions of one plant in one frame, in the scans' own units
+    (metres): sizes a units factor apart, or bounding boxes far apart for the plant's size."""
+    size_p, size_q = (float(np.ptp(c, axis=0).max()) for c in (previous, current))
+    small, large = sorted((size_p, size_q))
+    if small > 0 and large / small > UNIT_RATIO:
+        raise PointCloudError(
+            f"{names[0]} spans {1e3 * size_p:.4g} mm and {names[1]} {1e3 * size_q:.4g} mm, a factor "
+            f"{large / small:.0f} apart: the scans look like different units (mm vs m?); give --units")
+    gap = np.maximum(0.0, np.maximum(previous.min(0) - current.max(0), current.min(0) - previous.max(0)))
+    gap = float(np.linalg.norm(gap))
+    size = max(size_p, size_q)
+    if gap > 0.2 * size:
+        raise PointCloudError(
+            f"{names[0]} and {names[1]} do not overlap: their bounding boxes are {gap:.3g} m apart for a "
+            f"plant of {1e3 * size:.4g} mm; the two sessions must be in one frame (align them first, e.g. "
+            f"python -m data_tools prepare-session)")
+
+
 def up_rotation(up_axis: str = "+z") -> np.ndarray:
     """Proper rotation taking the scan axis ``up_axis`` (``+z``, ``-y``, ...) to +Z."""
     axes = {"x": 0, "y": 1, "z": 2}
@@ -74,14 +97,15 @@ def rotate_z(points: np.ndarray, degrees: float) -> np.ndarray:
 
 def normalise_plant(points, largest_side: float = 0.24, rotation_deg: float = 0.0,
                     centre: str = "bbox", table: bool = False, table_size: float = 0.4,
-                    table_resolution: float = 0.002, reference_points=None) -> PlantScene:
+                    table_resolution: float = 0.002, reference_points=None,
+                    name: str = "plant cloud") -> PlantScene:
     """Scale, rotate and centre a plant; optionally add the supporting table of the hemisphere setup.
 
     ``reference_points`` (e.g. the current session) defines scale and centre instead of ``points``,
     so that two sessions of one plant stay in one frame. ``centre`` is ``"bbox"`` (paper) or
-    ``"centroid"`` (the authors' code).
+    ``"centroid"`` (the authors' code). ``name`` names the cloud in errors (e.g. its file).
     """
-    points = checked_cloud(points, "plant cloud")
+    points = checked_cloud(points, name)
     ref = points if reference_points is None else checked_cloud(reference_points, "reference cloud")
     if not (largest_side > 0):
         raise ConfigError(f"largest_side must be > 0 m, got {largest_side!r}")
@@ -89,7 +113,7 @@ def normalise_plant(points, largest_side: float = 0.24, rotation_deg: float = 0.
         raise ConfigError(f"centre must be 'bbox' or 'centroid', got {centre!r}")
     extent = np.ptp(ref, axis=0).max()
     if extent <= 0:
-        raise PointCloudError("plant cloud has zero extent (all points coincide)")
+        raise PointCloudError(f"{name} has zero extent (all points coincide)")
     scale = largest_side / extent
     rotated = _rotate_z(ref * scale, rotation_deg)
     if centre == "bbox":

@@ -29,15 +29,82 @@ def voxel_keys(points: np.ndarray, resolution: float) -> np.ndarray:
     """Integer voxel key of every point (duplicates kept), ``(N, 3) int64``."""
     resolution = _check_resolution(resolution)
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-    if not np.all(np.isfinite(points)):
-        raise PointCloudError("cannot voxelise a cloud with NaN or infinite coordinates")
-    keys = np.floor(points / resolution).astype(np.int64)
+    _check_finite(points)
+    scaled = points / resolution
+    np.floor(scaled, out=scaled)  # in place: one (N, 3) float temporary instead of two
+    keys = scaled.astype(np.int64)
+    del scaled
     if keys.size and (keys.min() < -KEY_OFFSET or keys.max() >= KEY_OFFSET):
-        raise PointCloudError(
-            f"coordinates span {np.ptp(points, axis=0).max():.3g} m, too large for voxels of "
-            f"{resolution} m (wrong units?)"
-        )
+        _raise_span(points, resolution)
     return keys
+
+
+def _check_finite(points: np.ndarray) -> None:
+    if not np.isfinite(points).all():
+        raise PointCloudError("cannot voxelise a cloud with NaN or infinite coordinates")
+
+
+def _raise_span(points: np.ndarray, resolution: float):
+    raise PointCloudError(
+        f"coordinates span {np.ptp(points, axis=0).max():.3g} m, too large for voxels of "
+        f"{resolution} m (wrong units?)"
+    )
+
+
+# A dense table of the keys' bounding box replaces sorting when it has at most this many cells and
+# at most _DENSE_PER_POINT cells per point (int32 table: 4 bytes a cell, i.e. <= 128 MB).
+_DENSE_MAX_CELLS = 1 << 25
+_DENSE_PER_POINT = 8
+
+
+def _voxel_ranks(points: np.ndarray, resolution: float):
+    """Distinct voxels of a cloud in code order and every point's voxel rank, without sorting.
+
+    Returns ``(keys (M, 3) int64, inverse (N,) intp)`` equal to ``decode_keys(np.unique(codes,
+    return_inverse=True))``, or None when the cloud's box is too large for a dense table (the
+    caller then sorts). Code order is the lexicographic (x, y, z) order of the keys, which is the
+    order of the row-major linear index in the keys' bounding box, so ranks over that index are the
+    same numbers. Works column by column: no (N, 3) integer temporary.
+    """
+    n = len(points)
+    lo, hi, columns = [], [], []
+    for a in range(3):
+        k = points[:, a] / resolution
+        np.floor(k, out=k)
+        if n:
+            kmin, kmax = k.min(), k.max()
+            if kmin < -KEY_OFFSET or kmax >= KEY_OFFSET:
+                _raise_span(points, resolution)
+            lo.append(int(kmin))
+            hi.append(int(kmax))
+        columns.append(k)
+    if n == 0:
+        return None
+    shape = [h - l + 1 for l, h in zip(lo, hi)]
+    cells = shape[0] * shape[1] * shape[2]
+    if cells > _DENSE_MAX_CELLS or cells > _DENSE_PER_POINT * n:
+        return None
+    linear = columns[0].astype(np.int64)
+    linear -= lo[0]
+    for a in (1, 2):
+        linear *= shape[a]
+        column = columns[a].astype(np.int64)
+        column -= lo[a]
+        linear += column
+        del column
+    del columns
+    table = np.zeros(cells, dtype=np.int32)
+    table[linear] = 1
+    occupied = np.flatnonzero(table)
+    table[occupied] = np.arange(len(occupied), dtype=np.int32)
+    inverse = table[linear].astype(np.intp)
+    del table, linear
+    keys = np.empty((len(occupied), 3), dtype=np.int64)
+    keys[:, 2] = occupied % shape[2] + lo[2]
+    rest = occupied // shape[2]
+    keys[:, 1] = rest % shape[1] + lo[1]
+    keys[:, 0] = rest // shape[1] + lo[0]
+    return keys, inverse
 
 
 def key_centres(keys: np.ndarray, resolution: float) -> np.ndarray:
@@ -87,13 +154,39 @@ def unique_keys(keys: np.ndarray, return_counts: bool = False):
 
 
 def voxelise(points: np.ndarray, resolution: float) -> np.ndarray:
-    """Distinct voxel keys occupied by a cloud."""
+    """Distinct voxel keys occupied by a cloud (code order)."""
+    resolution = _check_resolution(resolution)
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    _check_finite(points)
+    ranked = _voxel_ranks(points, resolution)
+    if ranked is not None:
+        return ranked[0]
     return unique_keys(voxel_keys(points, resolution))
 
 
 def voxel_centres(points: np.ndarray, resolution: float) -> np.ndarray:
     """Centres of the distinct voxels occupied by a cloud (the usual 'voxel-downsampled' cloud)."""
     return key_centres(voxelise(points, resolution), resolution)
+
+
+def voxel_centroids(points: np.ndarray, resolution: float) -> np.ndarray:
+    """Centroid of the points in every occupied voxel (Open3D ``voxel_down_sample``), in key order.
+    Each centroid lies in its points' voxel, so the voxel set at ``resolution`` (or any multiple of
+    it) is unchanged: the reduction of large scans relies on that."""
+    resolution = _check_resolution(resolution)
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    _check_finite(points)
+    ranked = _voxel_ranks(points, resolution)
+    if ranked is not None:
+        keys, inverse = ranked
+        counts = np.bincount(inverse, minlength=len(keys))
+    else:
+        codes = encode_keys(voxel_keys(points, resolution))
+        _, inverse, counts = np.unique(codes, return_inverse=True, return_counts=True)
+        del codes
+    # per-point sums in point order, as before: the same floating-point numbers
+    sums = np.stack([np.bincount(inverse, weights=points[:, a], minlength=len(counts)) for a in range(3)], 1)
+    return sums / counts[:, None]
 
 
 def union_keys(*key_sets: np.ndarray) -> np.ndarray:

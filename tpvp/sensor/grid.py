@@ -68,11 +68,12 @@ def build_grid(keys: np.ndarray, resolution: float, countable: np.ndarray | None
     countable = np.asarray(countable, dtype=bool).reshape(-1)
     if countable.shape != (len(keys),):
         raise ConfigError(f"countable mask has {countable.size} entries for {len(keys)} voxels")
-    codes, first = np.unique(voxels.encode_keys(keys), return_index=True)
+    all_codes = voxels.encode_keys(keys)
+    codes, first, inverse = np.unique(all_codes, return_index=True, return_inverse=True)
+    del all_codes
     # A voxel is countable if any of its duplicates is (a plant voxel wins over a table voxel).
-    inverse = np.searchsorted(codes, voxels.encode_keys(keys))
     merged_countable = np.zeros(len(codes), dtype=bool)
-    np.logical_or.at(merged_countable, inverse, countable)
+    merged_countable[inverse[countable]] = True
     keys = keys[first]
 
     origin = keys.min(axis=0) - PAD

@@ -9,13 +9,30 @@ import numpy as np
 from tpvp.io.atomic import atomic_path
 from tpvp.sensor.camera import D435, look_at_rotation
 
+#: Points logged per cloud at most: larger clouds (multi-million-point scans at full resolution)
+#: are shown as a uniform random subsample (seed 0), and the recording says so under ``notes``.
+MAX_DISPLAY_POINTS = 300_000
+
+
+def display_points(points, limit: int = MAX_DISPLAY_POINTS) -> tuple[np.ndarray, int]:
+    """``(points to log as float32 (n, 3), points in the cloud)``: every point up to ``limit``,
+    else ``limit`` of them drawn without replacement (deterministic), in their original order."""
+    points = np.asarray(points).reshape(-1, 3)
+    total = len(points)
+    if total > limit:
+        keep = np.sort(np.random.default_rng(0).choice(total, limit, replace=False))
+        points = points[keep]
+    return np.asarray(points, dtype=np.float32), total
+
 
 def write_recording(path, clouds: dict, cameras: dict | None = None, paths: dict | None = None,
                     application: str = "tpvp") -> Path:
     """Save a rerun recording.
 
     ``clouds``: name -> (points, rgb colour tuple); ``cameras``: group name -> (positions, look_ats);
-    ``paths``: name -> polyline ``(n, 3)``. Frusta use the D435 intrinsics.
+    ``paths``: name -> polyline ``(n, 3)``. Frusta use the D435 intrinsics. Clouds of more than
+    :data:`MAX_DISPLAY_POINTS` points are logged as a deterministic subsample, noted in the
+    recording (entity ``notes/display``).
     """
     import rerun as rr  # imported lazily: the viewer SDK is heavy and only needed here
 
@@ -24,9 +41,17 @@ def write_recording(path, clouds: dict, cameras: dict | None = None, paths: dict
     with atomic_path(path) as tmp:
         recording.save(str(tmp))
         recording.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+        notes = []
         for name, (points, colour) in clouds.items():
-            points = np.asarray(points, dtype=np.float32).reshape(-1, 3)
+            points, total = display_points(points)
+            if len(points) < total:
+                notes.append(f"- `world/{name}`: {len(points):,} of {total:,} points shown "
+                             f"(uniform random subsample for display, seed 0)")
             recording.log(f"world/{name}", rr.Points3D(points, colors=colour, radii=0.0008), static=True)
+        if notes:
+            recording.log("notes/display", rr.TextDocument(
+                f"Clouds of more than {MAX_DISPLAY_POINTS:,} points are subsampled for display:\n\n"
+                + "\n".join(notes), media_type=rr.MediaType.MARKDOWN), static=True)
         for group, (positions, look_ats) in (cameras or {}).items():
             positions = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
             look_ats = np.broadcast_to(np.asarray(look_ats, dtype=np.float64).reshape(-1, 3), positions.shape)

@@ -1,0 +1,273 @@
+"""Whole-folder atomic outputs: stage a run next to its destination, publish it in one step.
+
+Every command that writes a folder (``tpvp plan/demo/render``, the data tools' datasets, the
+experiment runners' caches) goes through :func:`staged_folder`:
+
+1. an OS lock (``flock`` on ``<parent>/.<name>.tpvp-lock``; a killed process cannot leave it
+   behind) makes a second concurrent run on the same destination fail at once with one line;
+2. leftovers of a run that crashed are repaired (see :func:`_recover`);
+3. the command writes its files into a hidden staging folder beside the destination (same file
+   system). ``keep_existing=True`` (datasets) starts the staging folder as a hard-linked copy of the
+   destination, so the command adds or replaces files and keeps the others;
+4. the commit swaps the staging folder into place with two renames while SIGINT and SIGTERM are
+   held back (delivered right after), so Ctrl-C lands before the commit (nothing changed) or after it (everything
+   published), never between; the report says which (:class:`RunInterrupted`).
+
+A reader therefore sees the destination wholly old or wholly new. Nothing the command did not write
+is deleted: a run folder may only replace a folder that is empty or holds a previous tpvp run's
+files and nothing else (``.tpvp-run.json`` lists them); inputs inside the destination are refused.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import errno
+import fcntl
+import json
+import os
+import shutil
+import signal
+import threading
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Iterator
+
+from tpvp.errors import BusyError, ConfigError, InputFileError, OutputWriteError
+from tpvp.io import faults
+
+RUN_MARKER = ".tpvp-run.json"
+_HELD = (signal.SIGINT, signal.SIGTERM)
+
+
+class RunInterrupted(KeyboardInterrupt):
+    """Ctrl-C (or SIGTERM) during a staged run; ``published`` tells whether the commit happened."""
+
+    def __init__(self, destination: Path, published: bool, existed: bool = True):
+        super().__init__(str(destination))
+        self.destination = destination
+        self.published = published
+        self.existed = existed
+
+    def report(self) -> str:
+        if self.published:
+            return f"interrupted after {self.destination} was published completely"
+        if not self.existed:
+            return f"interrupted; nothing was written: {self.destination} was not created"
+        return f"interrupted; nothing was written: {self.destination} is as it was"
+
+
+class Stage:
+    """The staging folder of one run: write files under :attr:`folder` or via :meth:`path`."""
+
+    def __init__(self, destination: Path, folder: Path):
+        self.destination = destination
+        self.folder = folder
+        self.published = False
+
+    def path(self, relative: str | os.PathLike) -> Path:
+        """Staging path of ``destination/relative``, parent created. A hard link to the old file
+        (``keep_existing``) is removed first, so writing there never alters the published copy."""
+        relative = Path(relative)
+        if relative.is_absolute() or ".." in relative.parts:
+            raise ConfigError(f"staged paths must be relative to {self.destination}, got {relative}")
+        staged = self.folder / relative
+        staged.parent.mkdir(parents=True, exist_ok=True)
+        with contextlib.suppress(FileNotFoundError):
+            staged.unlink()
+        return staged
+
+    def existing(self, relative: str | os.PathLike) -> Path:
+        """Path of ``relative`` in the published destination (to read the old version)."""
+        return self.destination / relative
+
+
+def _sibling(destination: Path, kind: str) -> Path:
+    return destination.parent / f".{destination.name}.tpvp-{kind}"
+
+
+def _lock(destination: Path, what: str) -> int:
+    lock = _sibling(destination, "lock")
+    try:
+        fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o666)
+    except OSError as exc:
+        raise OutputWriteError(f"cannot write {what} {destination}: {exc.strerror or exc}") from None
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError as exc:
+        os.close(fd)
+        if exc.errno in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES):
+            raise BusyError(f"{what} {destination} is being written by another run; wait for it to finish "
+                            f"or choose another folder") from None
+        raise OutputWriteError(f"cannot lock {what} {destination}: {exc.strerror or exc}") from None
+    return fd
+
+
+def _recover(destination: Path) -> None:
+    """Repair what a crashed run left (we hold the lock, so every staging folder is stale): a
+    backup without its destination is a commit cut between its two renames - roll it back; a
+    backup beside its destination is a finished commit - drop it."""
+    for old in destination.parent.glob(f".{destination.name}.tpvp-old-*"):
+        if destination.exists():
+            shutil.rmtree(old, ignore_errors=True)
+        else:
+            os.rename(old, destination)
+    for staging in destination.parent.glob(f".{destination.name}.tpvp-staging-*"):
+        shutil.rmtree(staging, ignore_errors=True)
+
+
+def _check_inputs(destination: Path, inputs, what: str) -> None:
+    """Refuse a destination that holds an input, lies inside an input folder, or is the folder the
+    process runs in (replacing it would pull the shell's working folder away)."""
+    dest = destination.resolve()
+    for item in inputs:
+        src = Path(item).resolve()
+        if src == dest or dest in src.parents or src in dest.parents and src.is_dir():
+            raise ConfigError(f"{what} {destination} would overwrite or write inside the input {item}; "
+                              f"choose a folder outside the inputs")
+    cwd = Path.cwd().resolve()
+    if cwd == dest or dest in cwd.parents:
+        raise ConfigError(f"{what} {destination} is the folder you are working in (or holds it); "
+                          f"choose a new subfolder, e.g. {Path(destination) / 'run'}")
+
+
+def _run_files(folder: Path) -> set[str]:
+    return {p.relative_to(folder).as_posix() for p in folder.rglob("*") if not p.is_dir()}
+
+
+def _check_replaceable(destination: Path, what: str) -> None:
+    """A run folder may replace an empty folder or a previous tpvp run's files, nothing else."""
+    if not destination.exists():
+        return
+    if not destination.is_dir():
+        raise ConfigError(f"{what} {destination} exists and is not a folder")
+    present = _run_files(destination)
+    if not present:
+        return
+    marker = destination / RUN_MARKER
+    written = set()
+    if marker.is_file():
+        with contextlib.suppress(OSError, ValueError, TypeError):
+            written = set(json.loads(marker.read_text())["files"]) | {RUN_MARKER}
+    foreign = sorted(present - written)
+    if foreign:
+        shown = ", ".join(foreign[:5]) + (f" and {len(foreign) - 5} more" if len(foreign) > 5 else "")
+        raise ConfigError(f"{what} {destination} holds files that no tpvp run recorded as its own ({shown}); "
+                          f"choose a new or empty folder, or move them away (tpvp never deletes files it did "
+                          f"not write)")
+
+
+def _link_tree(source: Path, target: Path) -> None:
+    """Hard-link every file of ``source`` into ``target`` (copy where links are not possible)."""
+    for item in source.rglob("*"):
+        relative = item.relative_to(source)
+        if item.is_dir() and not item.is_symlink():
+            (target / relative).mkdir(parents=True, exist_ok=True)
+            continue
+        (target / relative).parent.mkdir(parents=True, exist_ok=True)
+        try:
+            os.link(item, target / relative, follow_symlinks=False)
+        except OSError:
+            shutil.copy2(item, target / relative, follow_symlinks=False)
+
+
+def _fsync_dir(folder: Path) -> None:
+    with contextlib.suppress(OSError):
+        fd = os.open(folder, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+
+
+def _commit(stage: Stage, keep_existing: bool) -> None:
+    destination, staging = stage.destination, stage.folder
+    if not keep_existing:
+        files = sorted(_run_files(staging))
+        payload = {"files": files, "written_utc": datetime.now(timezone.utc).isoformat(timespec="seconds")}
+        (staging / RUN_MARKER).write_text(json.dumps(payload, indent=1) + "\n")
+    _fsync_dir(staging)
+    old = _sibling(destination, f"old-{os.getpid()}")
+    with _signals_held():
+        faults.checkpoint("commit")
+        if destination.exists():
+            os.rename(destination, old)
+        faults.checkpoint("swap")
+        os.rename(staging, destination)
+        stage.published = True
+        _fsync_dir(destination.parent)
+        shutil.rmtree(old, ignore_errors=True)  # still held: no backup is left behind
+
+
+@contextlib.contextmanager
+def _signals_held():
+    """Hold SIGINT and SIGTERM back for the block, then deliver them. Handlers, not a signal mask:
+    a mask holds only the calling thread, and a Ctrl-C may land on any of numba's or torch's."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    arrived = []
+    previous = {signum: signal.signal(signum, lambda signum, frame: arrived.append(signum)) for signum in _HELD}
+    try:
+        yield
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+    for signum in dict.fromkeys(arrived):
+        signal.raise_signal(signum)  # now under the usual handler: KeyboardInterrupt for Ctrl-C
+
+
+@contextlib.contextmanager
+def staged_folder(destination, *, keep_existing: bool = False, inputs=(), what: str = "output folder") -> Iterator[Stage]:
+    """Lock ``destination``, yield a :class:`Stage` to write into, publish it all at once on normal
+    exit; on an error or Ctrl-C the destination is left as it was. See the module docstring."""
+    destination = Path(destination).absolute()
+    _check_inputs(destination, inputs, what)
+    try:
+        destination.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise OutputWriteError(f"cannot create {destination.parent}: {exc.strerror or exc}") from None
+    lock = _lock(destination, what)
+    stage = None
+    existed = destination.exists()
+    try:
+        _recover(destination)
+        if not keep_existing:
+            _check_replaceable(destination, what)
+        elif destination.exists() and not destination.is_dir():
+            raise ConfigError(f"{what} {destination} exists and is not a folder")
+        staging = _sibling(destination, f"staging-{os.getpid()}")
+        staging.mkdir()
+        stage = Stage(destination, staging)
+        if keep_existing and destination.is_dir():
+            _link_tree(destination, staging)
+        yield stage
+        _commit(stage, keep_existing)
+    except KeyboardInterrupt:
+        raise RunInterrupted(destination, bool(stage and stage.published), existed) from None
+    except OSError as exc:
+        if isinstance(exc, InputFileError) and not _mentions(exc, destination):
+            raise
+        raise OutputWriteError(_in_user_terms(exc, stage, destination)) from None
+    finally:
+        if stage is not None and not stage.published:
+            shutil.rmtree(stage.folder, ignore_errors=True)
+        os.close(lock)  # releases the flock
+
+
+def _mentions(exc: BaseException, destination: Path) -> bool:
+    """Whether an error is about writing the destination (not about reading an input)."""
+    text = str(exc)
+    return f".{destination.name}.tpvp-staging-" in text or any(
+        text.find(str(destination) + end) >= 0 for end in (os.sep, ":", " ", ";", ","))
+
+
+def _in_user_terms(exc: OSError, stage: Stage | None, destination: Path) -> str:
+    """The error with staging paths written as their destination paths, and what happened."""
+    text = str(exc) if isinstance(exc, InputFileError) else f"{exc.strerror or exc}"
+    if stage is not None:
+        text = text.replace(str(stage.folder), str(destination))
+    if not isinstance(exc, InputFileError):
+        text = f"cannot write {getattr(exc, 'filename', None) or destination}: {text}"
+        if stage is not None:
+            text = text.replace(str(stage.folder), str(destination))
+    return f"{text}; nothing was published: {destination} is as it was"
