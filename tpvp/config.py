@@ -43,7 +43,7 @@ class SceneConfig:
     0.4 m around the real plant in native mode. table: None = the view space's choice.
     up_axis: the scan axis that points up; the plant is turned so that it becomes +Z.
     reduce_above / reduce_resolution: scans with more points are reduced to voxel centroids at
-    ``reduce_resolution`` (planning frame; a quarter of the ground-truth voxel, so the ground truth
+    ``reduce_resolution`` (planning frame; half the ground-truth voxel, so the ground truth
     is unchanged) before anything else. min_plant_voxels: fewer occupied ground-truth voxels than
     this is not a plant scan (the bundled tomato has 3,890).
     """
@@ -58,7 +58,7 @@ class SceneConfig:
     radius: float | None = None
     up_axis: str = "+z"
     reduce_above: int = 1_000_000
-    reduce_resolution: float = 0.0005
+    reduce_resolution: float = 0.001
     min_plant_voxels: int = 100
 
     def __post_init__(self):
@@ -215,7 +215,7 @@ NAMED = {"paper": ("plant", {}), "paper-row": ("row", {})}
 DERIVED = {
     "plant": {
         "scene.table_resolution": ("1 x gt_resolution", lambda c: c["gt_resolution"]),
-        "scene.reduce_resolution": ("gt_resolution / 4 (large scans only)", lambda c: c["gt_resolution"] / 4),
+        "scene.reduce_resolution": ("gt_resolution / 2 (large scans only)", lambda c: c["gt_resolution"] / 2),
         "registration.embedded_deformation.node_coverage": ("2 x gt_resolution (nricp_resolution_factor)",
                                                             lambda c: 2 * c["gt_resolution"]),
         "registration.embedded_deformation.seed": ("seed", lambda c: c["seed"]),

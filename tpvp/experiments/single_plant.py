@@ -111,8 +111,10 @@ def build_scene(previous_points, current_points, config: PlantConfig = PlantConf
     ``scene.reduce_above`` points are reduced to voxel centroids at ``scene.reduce_resolution``;
     the ground truth is built from every point of the current scan, so it does not change."""
     up = up_rotation(config.scene.up_axis)
-    current_scan = checked_cloud(current_points, names[1]) @ up.T
-    previous_scan = checked_cloud(previous_points, names[0]) @ up.T
+    current_scan, previous_scan = (checked_cloud(points, name) for points, name in
+                                   ((current_points, names[1]), (previous_points, names[0])))
+    if config.scene.up_axis != "+z":
+        current_scan, previous_scan = current_scan @ up.T, previous_scan @ up.T
     check_session_pair(previous_scan, current_scan, names)
     space = get_view_space(config.view_space)
     current = normalise_plant(current_scan, config.scene.largest_side, config.scene.rotation_deg,
@@ -128,19 +130,21 @@ def build_scene(previous_points, current_points, config: PlantConfig = PlantConf
         space = space.with_radius(config.scene.radius)
     grid = plant_grid(current.points, current.table_points, config.gt_resolution)
     previous = current.transform(previous_scan)
-    for name, points, count in ((names[0], previous, None), (names[1], current.points, int(grid.countable.sum()))):
+    del previous_scan, current_scan
+    reduction = {"resolution_m": config.scene.reduce_resolution, "previous_points": len(previous),
+                 "current_points": len(current.points)}
+    # Centroids lie in their points' voxels, so the reduction keeps the ground-truth voxel sets.
+    previous, current_points = (voxels.voxel_centroids(p, config.scene.reduce_resolution)
+                                if len(p) > config.scene.reduce_above else p
+                                for p in (previous, current.points))
+    reduction.update(previous_points_used=len(previous), current_points_used=len(current_points))
+    for name, points, count in ((names[0], previous, None), (names[1], current_points, int(grid.countable.sum()))):
         count = len(voxels.voxelise(points, config.gt_resolution)) if count is None else count
         if count < config.scene.min_plant_voxels:
             raise PointCloudError(
                 f"{name}: only {count} occupied {1e3 * config.gt_resolution:g} mm voxels once the plant is "
                 f"scaled to a {config.scene.largest_side:g} m largest side ({len(points)} points); a plant scan "
                 f"has at least {config.scene.min_plant_voxels} - is this the right file?")
-    reduction = {"resolution_m": config.scene.reduce_resolution, "previous_points": len(previous),
-                 "current_points": len(current.points)}
-    previous, current_points = (voxels.voxel_centroids(p, config.scene.reduce_resolution)
-                                if len(p) > config.scene.reduce_above else p
-                                for p in (previous, current.points))
-    reduction.update(previous_points_used=len(previous), current_points_used=len(current_points))
     truth = visibility_matrix(grid, space.positions, space.look_ats, sensor)
     plant_from_scan = current.matrix
     plant_from_scan[:3, :3] = plant_from_scan[:3, :3] @ up

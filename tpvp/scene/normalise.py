@@ -43,6 +43,8 @@ class PlantScene:
 
 
 def _rotate_z(points: np.ndarray, degrees: float) -> np.ndarray:
+    if degrees == 0:
+        return points.copy()
     a = np.deg2rad(degrees)
     c, s = np.cos(a), np.sin(a)
     rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
@@ -53,16 +55,22 @@ def _rotate_z(points: np.ndarray, degrees: float) -> np.ndarray:
 UNIT_RATIO = 20.0
 
 
+def _bounds(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per-axis minimum and maximum, column by column (fast on large (N, 3) arrays)."""
+    return (np.array([points[:, a].min() for a in range(3)]), np.array([points[:, a].max() for a in range(3)]))
+
+
 def check_session_pair(previous: np.ndarray, current: np.ndarray, names=("previous", "current")) -> None:
     """Refuse two scans that cannot be sessions of one plant in one frame, in the scans' own units
     (metres): sizes a units factor apart, or bounding boxes far apart for the plant's size."""
-    size_p, size_q = (float(np.ptp(c, axis=0).max()) for c in (previous, current))
+    (lo_p, hi_p), (lo_q, hi_q) = (_bounds(c) for c in (previous, current))
+    size_p, size_q = float((hi_p - lo_p).max()), float((hi_q - lo_q).max())
     small, large = sorted((size_p, size_q))
     if small > 0 and large / small > UNIT_RATIO:
         raise PointCloudError(
             f"{names[0]} spans {1e3 * size_p:.4g} mm and {names[1]} {1e3 * size_q:.4g} mm, a factor "
             f"{large / small:.0f} apart: the scans look like different units (mm vs m?); give --units")
-    gap = np.maximum(0.0, np.maximum(previous.min(0) - current.max(0), current.min(0) - previous.max(0)))
+    gap = np.maximum(0.0, np.maximum(lo_p - hi_q, lo_q - hi_p))
     gap = float(np.linalg.norm(gap))
     size = max(size_p, size_q)
     if gap > 0.2 * size:
@@ -111,16 +119,19 @@ def normalise_plant(points, largest_side: float = 0.24, rotation_deg: float = 0.
         raise ConfigError(f"largest_side must be > 0 m, got {largest_side!r}")
     if centre not in ("bbox", "centroid"):
         raise ConfigError(f"centre must be 'bbox' or 'centroid', got {centre!r}")
-    extent = np.ptp(ref, axis=0).max()
+    lo, hi = _bounds(ref)
+    extent = (hi - lo).max()
     if extent <= 0:
         raise PointCloudError(f"{name} has zero extent (all points coincide)")
     scale = largest_side / extent
     rotated = _rotate_z(ref * scale, rotation_deg)
     if centre == "bbox":
-        offset = 0.5 * (rotated.min(axis=0) + rotated.max(axis=0))
+        lo, hi = _bounds(rotated)
+        offset = 0.5 * (lo + hi)
     else:
         offset = rotated.mean(axis=0)
-    plant = _rotate_z(points * scale, rotation_deg) - offset
+    plant = rotated if ref is points else _rotate_z(points * scale, rotation_deg)
+    plant -= offset  # in place: large scans are hundreds of MB
     table_points = np.zeros((0, 3))
     if table:
         table_points = table_slab(plant, table_size, table_resolution)
