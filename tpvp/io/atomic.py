@@ -42,6 +42,16 @@ def _create_temp(path: Path) -> tuple[Path, int]:
     raise InputFileError(f"cannot write {path}: no free temporary file name in {path.parent}")
 
 
+def fsync_path(path: Path) -> None:
+    """Flush a file's or a folder's entries to disk (best effort)."""
+    with contextlib.suppress(OSError):
+        fd = os.open(path, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+
+
 def _remove_quietly(tmp: Path) -> None:
     with contextlib.suppress(OSError):
         tmp.unlink()
@@ -80,13 +90,7 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
         raise
     if not tmp.exists():
         raise InputFileError(f"cannot write {path}: the temporary file {tmp.name} disappeared")
-    with contextlib.suppress(OSError):
-        # Flush the data before the rename so a power cut cannot leave an empty file behind.
-        fd = os.open(tmp, os.O_RDONLY)
-        try:
-            os.fsync(fd)
-        finally:
-            os.close(fd)
+    fsync_path(tmp)  # flush the data before the rename: a power cut cannot leave an empty file
     _commit(tmp, path)
 
 

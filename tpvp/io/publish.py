@@ -34,6 +34,7 @@ from typing import Iterator
 
 from tpvp.errors import BusyError, ConfigError, InputFileError, OutputWriteError
 from tpvp.io import faults
+from tpvp.io.atomic import fsync_path
 
 RUN_MARKER = ".tpvp-run.json"
 _HELD = (signal.SIGINT, signal.SIGTERM)
@@ -170,22 +171,13 @@ def _link_tree(source: Path, target: Path) -> None:
             shutil.copy2(item, target / relative, follow_symlinks=False)
 
 
-def _fsync_dir(folder: Path) -> None:
-    with contextlib.suppress(OSError):
-        fd = os.open(folder, os.O_RDONLY)
-        try:
-            os.fsync(fd)
-        finally:
-            os.close(fd)
-
-
 def _commit(stage: Stage, keep_existing: bool) -> None:
     destination, staging = stage.destination, stage.folder
     if not keep_existing:
         files = sorted(_run_files(staging))
         payload = {"files": files, "written_utc": datetime.now(timezone.utc).isoformat(timespec="seconds")}
         (staging / RUN_MARKER).write_text(json.dumps(payload, indent=1) + "\n")
-    _fsync_dir(staging)
+    fsync_path(staging)
     old = _sibling(destination, f"old-{os.getpid()}")
     with _signals_held():
         faults.checkpoint("commit")
@@ -194,7 +186,7 @@ def _commit(stage: Stage, keep_existing: bool) -> None:
         faults.checkpoint("swap")
         os.rename(staging, destination)
         stage.published = True
-        _fsync_dir(destination.parent)
+        fsync_path(destination.parent)
         shutil.rmtree(old, ignore_errors=True)  # still held: no backup is left behind
 
 
