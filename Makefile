@@ -47,5 +47,9 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/plant_realism.py
 	$(BIN)/python benchmarks/row_realism.py
 
+# Every notebook in full mode (the paper's protocol); CI runs them in quick mode (make test).
+notebooks: $(STAMP)
+	$(BIN)/python -m tpvp.experiments.notebooks --output $(OUT)/notebooks
+
 clean:
 	rm -rf $(VENV) $(OUT) .pytest_cache

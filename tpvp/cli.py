@@ -42,11 +42,12 @@ def _config(args):
     from tpvp.config import load_config, parse_overrides
 
     overrides = {}
-    initial = args.initial_view
+    initial = getattr(args, "initial_view", None)
     if initial is not None and initial.lstrip("-").isdigit():
         initial = int(initial)
-    for key, value in (("view_space", args.view_space), ("initial_view", initial),
-                       ("scene.scale", args.scale), ("scene.radius", args.radius), ("scene.up_axis", args.up_axis)):
+    for key, value in (("view_space", getattr(args, "view_space", None)), ("initial_view", initial),
+                       ("scene.scale", getattr(args, "scale", None)), ("scene.radius", getattr(args, "radius", None)),
+                       ("scene.up_axis", getattr(args, "up_axis", None))):
         if value is not None:
             overrides[key] = value
     overrides.update(parse_overrides(args.set))
@@ -152,6 +153,22 @@ def _show_config(args) -> int:
     return 0
 
 
+def _experiments_plants(args) -> int:
+    from tpvp.experiments import plants
+
+    config = _config(args)
+    cases = plants.default_cases(args.quick, args.dataset, args.plants, args.pairs, args.paper_subset,
+                                 tuple(args.view_spaces), tuple(args.rotations), tuple(args.initial_views))
+    methods = args.methods or list(plants.ALL_METHODS)
+    print(f"{len(cases)} cases x {len(methods)} methods on {args.workers} worker(s); cache {args.cache}")
+    raw = plants.run_experiments(cases, methods, config, cache_dir=args.cache, workers=args.workers)
+    written = plants.write_results(args.output, raw, config)
+    print(plants.markdown(written["table1_coverage_effort"]))
+    print(f"wrote {Path(args.output).absolute()}/ (raw_cases.csv, {', '.join(f'{n}.csv/.md' for n in written)}, "
+          f"paper_values.csv)")
+    return 0
+
+
 def _view_space_arg(value: str) -> str:
     from tpvp.viewspace import get_view_space
 
@@ -170,7 +187,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"tpvp {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
 
-    def common(p, output):
+    def common(p, output, case_options=True):
         if output is not None:
             p.add_argument("--output", default=output, help="output folder (default: %(default)s)")
         p.add_argument("--config", default="paper", metavar="NAME|FILE",
@@ -178,6 +195,8 @@ def build_parser() -> argparse.ArgumentParser:
         p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                        help="override one configuration key, e.g. --set registration.embedded_deformation.iterations=100 "
                             "(repeatable; `tpvp config --derived` lists the keys)")
+        if not case_options:
+            return
         p.add_argument("--view-space", default=None, type=_view_space_arg, metavar="SPACE",
                        help=f"candidate views: {view_space_choices()} (default: the configuration's, hemisphere)")
         p.add_argument("--initial-view", default=None, metavar="INDEX|NAME",
@@ -215,6 +234,27 @@ def build_parser() -> argparse.ArgumentParser:
     render.add_argument("--model", default="reference", choices=["reference", "pixel"],
                         help="sensor model (default: the authors' voxel-driven 'reference')")
     render.set_defaults(func=_render)
+    experiments = sub.add_parser("experiments", help="the paper's experiments (tables, figures)")
+    which = experiments.add_subparsers(dest="experiment", required=True)
+    plant = which.add_parser("plants", help="individual plants: Tables I-IV, every baseline, the exact optimum")
+    common(plant, "outputs/experiments/plants", case_options=False)
+    plant.add_argument("--dataset", type=Path, default=None,
+                       help="a folder written by `python -m data_tools pheno4d prepare` (default: generated "
+                            "tomato and maize pairs plus the bundled real pair, offline)")
+    plant.add_argument("--plants", nargs="+", default=None, help="only these plants of the dataset (e.g. Tomato01)")
+    plant.add_argument("--pairs", nargs="+", type=int, default=None, help="only these rows of the dataset's pairs.csv")
+    plant.add_argument("--paper-subset", action="store_true", help="plants 1-3 of each species, one pair each")
+    plant.add_argument("--view-spaces", nargs="+", default=["hemisphere", "sphere"], help="(default: %(default)s)")
+    plant.add_argument("--rotations", nargs="+", type=float, default=[0.0, 45.0], help="degrees about +Z (default: %(default)s)")
+    plant.add_argument("--initial-views", nargs="+", type=int, default=[17, 8, 21], help="(default: %(default)s)")
+    plant.add_argument("--methods", nargs="+", default=None,
+                       help="methods to run (default: all: ours, ours-no-inflation, initial-view-only, "
+                            "initial-view-only-no-inflation, one-shot-no-prior, gmc, optimum, ma-scvp)")
+    plant.add_argument("--quick", action="store_true", help="a few cases: one tomato and one maize pair, rotation 0, view 17")
+    plant.add_argument("--workers", type=int, default=2, help="parallel processes (default: %(default)s)")
+    plant.add_argument("--cache", default="outputs/cache/plants",
+                       help="cache folder of per-task rows; an interrupted run resumes (default: %(default)s)")
+    plant.set_defaults(func=_experiments_plants)
     show = sub.add_parser("config", help="print the resolved configuration as YAML (save it, edit it, pass it "
                                          "back with --config)")
     common(show, None)

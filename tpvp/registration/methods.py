@@ -51,6 +51,13 @@ def no_registration(previous, coarse, config) -> Alignment:
     return Alignment(previous, chamfer, chamfer, 0.0)
 
 
+@REGISTRATION_METHODS.register("no-prior")
+def no_prior(previous, coarse, config) -> Alignment:
+    """No previous session: the coarse reconstruction stands in for it (one-shot planning without a prior)."""
+    coarse = np.unique(np.asarray(coarse, dtype=np.float64), axis=0)
+    return Alignment(coarse, 0.0, 0.0, 0.0)
+
+
 def register(previous, coarse, config) -> Alignment:
     """Run the registration method named by ``config.method``."""
     return REGISTRATION_METHODS.get(config.method)(previous, coarse, config)

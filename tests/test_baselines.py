@@ -1,0 +1,173 @@
+"""Baselines: max coverage against brute force, the NBV (GMC) curve and the exact optimum."""
+
+import itertools
+
+import numpy as np
+import pytest
+from scipy import sparse
+
+from tpvp.errors import ConfigError
+from tpvp.experiments.baselines import NBV_COLUMNS, OPTIMUM_COLUMNS, nbv_curve, optimum
+from tpvp.path.local import local_path_lengths, obstacle_radius
+from tpvp.setcover import SetCoverConfig
+from tpvp.setcover.maxcover import MaxCoverResult, max_coverage
+from tpvp.solvers import SOLVERS
+from tpvp.visibility import coverage_ratio, covered_voxels
+
+
+def subsets_cover(a, base, views, max_size):
+    """Covered count of ``base | union(combo)`` for every combo of at most ``max_size`` views."""
+    best = int(base.sum())
+    for size in range(1, max_size + 1):
+        combos = np.asarray(list(itertools.combinations(views, size)), dtype=np.int64)
+        if combos.size == 0:
+            break
+        union = a[combos].any(axis=1) | base
+        best = max(best, int(union.sum(axis=1).max()))
+    return best
+
+
+def brute_max_cover(a, k, executed=(), weights=None):
+    a = np.asarray(a, dtype=bool)
+    base = a[list(executed)].any(axis=0) if len(executed) else np.zeros(a.shape[1], bool)
+    views = [v for v in range(a.shape[0]) if v not in set(executed)]
+    if weights is None:
+        return subsets_cover(a, base, views, k)
+    best = float(weights[base].sum())
+    for size in range(1, k + 1):
+        for combo in itertools.combinations(views, size):
+            best = max(best, float(weights[base | a[list(combo)].any(axis=0)].sum()))
+    return best
+
+
+@pytest.mark.parametrize("solver", SOLVERS)
+def test_max_coverage_equals_brute_force(solver):
+    rng = np.random.default_rng(7)
+    config = SetCoverConfig(solver=solver, time_limit=30.0)
+    used = set()
+    for trial in range(6):
+        a = rng.random((8, 30)) < rng.uniform(0.1, 0.4)
+        if trial % 2:
+            a[:, 5:10] = a[:, [0]]  # identical columns, merged into one weighted class
+            a[:, 12] = False  # a voxel no view sees
+        executed = sorted(rng.choice(8, size=int(rng.integers(0, 3)), replace=False).tolist())
+        for k in (1, 2, 3, 5):
+            result = max_coverage(sparse.csr_matrix(a), k, executed=executed, config=config)
+            assert isinstance(result, MaxCoverResult)
+            assert result.covered == brute_max_cover(a, k, executed), (trial, k, executed)
+            assert result.optimal and result.gap == 0.0 and result.bound == result.objective == result.covered
+            sel = result.selected
+            assert sel.size <= k and np.all(np.diff(sel) > 0) and not set(sel.tolist()) & set(executed)
+            assert covered_voxels(sparse.csr_matrix(a), list(sel) + executed).size == result.covered
+            used.add(result.solver)
+    assert solver in used  # the ILP ran (not only the trivial cases)
+
+
+@pytest.mark.parametrize("solver", SOLVERS)
+def test_max_coverage_time_limit_reports_incumbent_and_bound(solver):
+    rng = np.random.default_rng(0)
+    a = rng.random((80, 4000)) < 0.05
+    result = max_coverage(a, 8, executed=[0], config=SetCoverConfig(solver=solver, time_limit=0.5))
+    assert not result.optimal and result.bound > result.objective
+    assert result.gap == pytest.approx((result.bound - result.objective) / result.bound)
+    assert result.selected.size == 8 and result.covered == covered_voxels(sparse.csr_matrix(a),
+                                                                          [0, *result.selected]).size
+
+
+@pytest.mark.parametrize("solver", SOLVERS)
+def test_max_coverage_weights(solver):
+    rng = np.random.default_rng(3)
+    a = rng.random((7, 25)) < 0.3
+    weights = rng.integers(0, 5, size=25).astype(float)
+    result = max_coverage(a, 2, executed=[1], config=SetCoverConfig(solver=solver), weights=weights)
+    assert result.objective == pytest.approx(brute_max_cover(a, 2, [1], weights))
+    assert result.optimal
+
+
+def test_max_coverage_trivial_and_bad_input():
+    a = np.eye(4, dtype=bool)
+    result = max_coverage(a, 5, executed=[0])  # every useful view fits the budget: no solver
+    assert result.selected.tolist() == [1, 2, 3] and result.covered == 4 and result.solver == "none"
+    assert max_coverage(np.zeros((3, 4), bool), 1).covered == 0
+    for k in (0, -1, 1.5, True, None):
+        with pytest.raises(ConfigError, match="k must be"):
+            max_coverage(a, k)
+    with pytest.raises(ConfigError, match="weights"):
+        max_coverage(a, 1, weights=[1, 2])
+    with pytest.raises(ConfigError, match="weights"):
+        max_coverage(a, 1, weights=[1, -1, 0, 0])
+    with pytest.raises(ConfigError, match="executed"):
+        max_coverage(a, 1, executed=[7])
+    with pytest.raises(ConfigError, match="SetCoverConfig"):
+        max_coverage(a, 1, config={"solver": "cbc"})
+
+
+@pytest.fixture(scope="module")
+def small_case():
+    from tpvp.config import make_config
+    from tpvp.experiments.single_plant import build_scene
+    from tpvp.synthetic.plants import generate_session_pair
+
+    config = make_config("plant", {"view_space": "tammes:10", "initial_view": 0,
+                                   "registration.embedded_deformation.iterations": 20})
+    pair = generate_session_pair("maize", 2, days=2.0)
+    return build_scene(pair.previous.points, pair.current.points, config), config
+
+
+def test_nbv_curve(small_case):
+    scene, config = small_case
+    n_views = len(scene.view_space)
+    curve = nbv_curve(scene, config, max_views=n_views + 2)  # more than there are: stops at all views
+    assert tuple(curve.columns) == NBV_COLUMNS
+    assert curve["views"].tolist() == list(range(1, n_views + 1))
+    views = curve["view"].tolist()
+    assert views[0] == 0 and sorted(views) == list(range(n_views))
+    assert curve["path_length"].iloc[0] == 0.0 and curve["step_length"].iloc[0] == 0.0
+    assert np.all(np.diff(curve["coverage"]) >= 0) and np.all(np.diff(curve["path_length"]) >= 0)
+    assert curve["coverage"].iloc[-1] == pytest.approx(1.0)
+    for k in (1, 3, n_views):
+        expected = coverage_ratio(covered_voxels(scene.truth_visibility, views[:k]), scene.oracle)
+        assert curve["coverage"].iloc[k - 1] == pytest.approx(expected)
+    # The move into view n uses the obstacle radius of what views 1..n-1 observed.
+    seen = scene.grid.centres[scene.truth_visibility[views[:2]].indices]
+    assert curve["radius"].iloc[2] == pytest.approx(obstacle_radius(seen, np.zeros(3)))
+    step = local_path_lengths(scene.views[views[1:3]], np.zeros(3), curve["radius"].iloc[2])[0, 1]
+    assert curve["step_length"].iloc[2] == pytest.approx(step)
+    assert curve["path_length"].iloc[-1] == pytest.approx(curve["step_length"].sum())
+
+    short = nbv_curve(scene, config, max_views=3)
+    assert short["view"].tolist() == views[:3] and len(short) == 3
+    for bad in (0, 2.5, True):
+        with pytest.raises(ConfigError, match="max_views"):
+            nbv_curve(scene, config, max_views=bad)
+
+
+def brute_min_views(a, initial, required):
+    """Fewest further views (initial executed) whose union with the initial view covers
+    ``required`` voxels, by enumeration."""
+    base = a[initial]
+    views = [v for v in range(a.shape[0]) if v != initial]
+    for size in range(0, len(views) + 1):
+        if subsets_cover(a, base, views, size) >= required:
+            return size
+    raise AssertionError("unreachable")
+
+
+def test_optimum(small_case):
+    scene, config = small_case
+    table = optimum(scene, config, targets=(1.0, 0.98))
+    assert tuple(table.columns) == OPTIMUM_COLUMNS
+    full, partial = table.iloc[0], table.iloc[1]
+    a = scene.truth_visibility[:, scene.oracle].toarray()
+    assert full["views"] == 1 + brute_min_views(a, 0, a.shape[1])
+    assert full["coverage"] == pytest.approx(1.0) and full["optimal"] and full["gap"] == 0.0
+    assert partial["views"] == 1 + brute_min_views(a, 0, int(np.ceil(0.98 * a.shape[1])))
+    assert partial["coverage"] >= 0.98 and partial["views"] <= full["views"] and partial["optimal"]
+    order = [int(v) for v in partial["order"].strip("[]").split(",")]
+    assert order[0] == 0 and len(order) == partial["views"]
+    stops = scene.views[order]
+    d = local_path_lengths(stops, np.zeros(3), obstacle_radius(scene.grid.centres[scene.oracle], np.zeros(3)))
+    assert partial["path_length"] == pytest.approx(np.trace(d, offset=1))
+    for bad in ((0.0,), (1.2,), (), ("x",), -0.5):
+        with pytest.raises(ConfigError, match="targets"):
+            optimum(scene, config, targets=bad)

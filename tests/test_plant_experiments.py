@@ -1,0 +1,107 @@
+"""The plant-experiment runner: every method on tiny cases, the cache, the tables, bad input."""
+
+import pandas as pd
+import pytest
+
+from tpvp.cli import main
+from tpvp.config import make_config
+from tpvp.errors import ConfigError, InputFileError
+from tpvp.experiments import plants
+
+CONFIG = make_config("plant", {"registration.embedded_deformation.iterations": 20})
+
+
+@pytest.fixture(scope="module")
+def tiny_cases():
+    instances = plants.generated_instances(seeds=(0,), species=("maize",))
+    return plants.case_list(instances, view_spaces=("tammes-hemisphere:12",), rotations=(0.0,), initial_views=(0, 5))
+
+
+@pytest.fixture(scope="module")
+def raw(tiny_cases, tmp_path_factory):
+    cache = tmp_path_factory.mktemp("cache")
+    table = plants.run_experiments(tiny_cases, list(plants.ALL_METHODS), CONFIG, cache_dir=cache, progress=False)
+    return table, cache
+
+
+def test_every_method_gives_rows_for_every_case(raw, tiny_cases):
+    table, _ = raw
+    for method in plants.ALL_METHODS:
+        rows = table[table["method"] == method]
+        assert rows["initial_view"].nunique() == len(tiny_cases), method
+    assert (table[table["method"] == "ma-scvp"]["status"] == "pending").all()
+    gmc = table[table["method"] == "gmc"]
+    for case_rows in gmc.groupby("initial_view"):
+        views = case_rows[1]["views"].to_numpy()
+        assert list(views) == list(range(1, len(views) + 1))  # row k executed exactly k views
+    ours = table[table["method"] == "ours"]
+    assert (ours["coverage"] > 0.8).all() and (ours["views"] >= 2).all()
+    optimum = table[table["method"] == "optimum"]
+    assert set(optimum["target"]) == {1.0, 0.98}
+
+
+def test_tables_hold_every_method_row(raw):
+    table, _ = raw
+    out = plants.tables(table)
+    methods = set(out["table1_coverage_effort"]["method"])
+    assert methods == set(plants.ALL_METHODS)
+    assert set(out["table3_inflation"]["method"]) == {"ours", "ours-no-inflation"}
+    assert set(out["table4_registration"]["method"]) == {"ours", "initial-view-only"}
+    assert "pending" in set(out["table1_coverage_effort"]["status"].dropna())
+    assert "| ours |" in plants.markdown(out["table1_coverage_effort"])
+
+
+def test_the_cache_is_reused_and_an_interrupted_run_resumes(raw, tiny_cases, monkeypatch):
+    table, cache = raw
+    files = sorted(cache.glob("*.parquet"))
+    assert len(files) == len(tiny_cases) * len(plants.ALL_METHODS)
+    files[0].unlink()  # as if the run had been interrupted before this task
+    calls = []
+    original = plants.PLANT_METHODS.get("ours")
+
+    def counting(scene, config):
+        calls.append(1)
+        return original(scene, config)
+
+    monkeypatch.setitem(plants.PLANT_METHODS._entries, "ours", counting)
+    again = plants.run_experiments(tiny_cases, list(plants.ALL_METHODS), CONFIG, cache_dir=cache, progress=False)
+    assert len(sorted(cache.glob("*.parquet"))) == len(files)
+    assert len(calls) <= 1  # only the missing task ran (if it was an "ours" task)
+    timings = [c for c in table.columns if c.startswith("seconds")]
+    pd.testing.assert_frame_equal(again.drop(columns=timings), table.drop(columns=timings), check_dtype=False)
+    # a changed configuration never reuses rows
+    changed = make_config("plant", {"registration.embedded_deformation.iterations": 21})
+    assert plants.task_key(tiny_cases[0], "ours", changed) != plants.task_key(tiny_cases[0], "ours", CONFIG)
+
+
+def test_bad_input_is_one_line(tmp_path, capsys):
+    with pytest.raises(InputFileError, match="no pairs.csv"):
+        plants.dataset_instances(tmp_path)
+    (tmp_path / "pairs.csv").write_text("plant,species\nTomato01,tomato\n")
+    with pytest.raises(InputFileError, match="missing columns"):
+        plants.dataset_instances(tmp_path)
+    with pytest.raises(ConfigError, match="unknown plant experiment method 'magic'"):
+        plants.run_experiments(plants.default_cases(quick=True), ["magic"])
+    with pytest.raises(ConfigError, match="case list is empty"):
+        plants.case_list([], ("hemisphere",))
+    assert main(["experiments", "plants", "--quick", "--methods", "magic", "--output", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "magic" in err[0]
+
+
+def test_a_prepared_dataset_becomes_instances(tmp_path):
+    from tpvp.io import write_point_cloud
+    from tpvp.synthetic.plants import generate_session_pair
+
+    pair = generate_session_pair("tomato", 1)
+    for name, points in (("T01_a.ply", pair.previous.points), ("T01_b.ply", pair.current.points)):
+        write_point_cloud(tmp_path / name, points)
+    (tmp_path / "pairs.csv").write_text("plant,species,previous_date,current_date,days_apart,previous_file,current_file\n"
+                                        "Tomato01,tomato,2020-03-05,2020-03-06,1,T01_a.ply,T01_b.ply\n"
+                                        "Tomato04,tomato,2020-03-05,2020-03-06,1,T01_a.ply,T01_b.ply\n")
+    assert [i.name for i in plants.dataset_instances(tmp_path, paper_subset=True)] == ["Tomato01-2020-03-05-2020-03-06"]
+    (instance,) = plants.dataset_instances(tmp_path, plants=["Tomato04"])
+    previous, current = instance.load()
+    assert len(previous) == len(pair.previous.points)
+    with pytest.raises(ConfigError, match="selects no pair"):
+        plants.dataset_instances(tmp_path, plants=["Maize09"])

@@ -1,0 +1,412 @@
+"""The individual-plant experiments of the paper (Tables I-IV): cases x methods, cached, in parallel.
+
+A *case* is one session pair of one plant in one view space, rotation and initial view (the paper's
+protocol: 2 species x 3 instances x 2 rotations x 3 initial views per view space). A *method* is a
+named entry of :data:`PLANT_METHODS` that turns a case's scene into result rows. Every
+(case, method) task is independent; its rows are cached on disk (Parquet, atomic writes) under a
+key hashing the case, the method, the resolved configuration and the package version, so a changed
+method never reuses stale rows, an interrupted run resumes, and a finished one re-renders instantly.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import re
+import time
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import asdict, dataclass, replace
+from functools import lru_cache
+from multiprocessing import get_context
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from tpvp import __version__
+from tpvp.config import PlantConfig, make_config, to_dict
+from tpvp.errors import ConfigError, InputFileError
+from tpvp.registry import Registry
+
+SPECIES = ("tomato", "maize")
+GENERATED_SEEDS = (0, 1, 2)
+ROTATIONS = (0.0, 45.0)
+INITIAL_VIEWS = (17, 8, 21)
+VIEW_SPACES = ("hemisphere", "sphere")
+GMC_BUDGETS = (5, 10, 15, 20)
+PAPER_TABLE = Path(__file__).resolve().parent.parent / "data" / "paper" / "individual_plant.csv"
+
+PLANT_METHODS = Registry("plant experiment method")
+
+
+@dataclass(frozen=True)
+class Instance:
+    """One session pair: generated (species + seed), bundled (the real tomato pair) or a pair of a
+    prepared dataset (``python -m data_tools pheno4d prepare``: two metric PLY files)."""
+
+    name: str
+    species: str
+    source: str  # "generated", "bundled" or "dataset"
+    seed: int = 0
+    previous_file: str = ""
+    current_file: str = ""
+
+    def load(self) -> tuple[np.ndarray, np.ndarray]:
+        return _load_instance(self)
+
+
+@lru_cache(maxsize=4)
+def _load_instance(instance: Instance):
+    if instance.source == "generated":
+        from tpvp.synthetic.plants import generate_session_pair
+
+        pair = generate_session_pair(instance.species, instance.seed, days=2.0)
+        return pair.previous.points, pair.current.points
+    if instance.source == "bundled":
+        from tpvp.scene.samples import load_sample
+
+        return load_sample("tomato_0305"), load_sample("tomato_0306")
+    from tpvp.io import read_point_cloud
+
+    return (read_point_cloud(instance.previous_file, units="m"), read_point_cloud(instance.current_file, units="m"))
+
+
+@dataclass(frozen=True)
+class Case:
+    instance: Instance
+    view_space: str
+    rotation_deg: float
+    initial_view: int
+
+    def config(self, base: PlantConfig) -> PlantConfig:
+        return make_config("plant", to_flat(base) | {"view_space": self.view_space, "initial_view": self.initial_view,
+                                                     "scene.rotation_deg": float(self.rotation_deg)})
+
+    def labels(self) -> dict:
+        return {"instance": self.instance.name, "species": self.instance.species, "source": self.instance.source,
+                "view_space": self.view_space, "rotation_deg": self.rotation_deg, "initial_view": self.initial_view}
+
+
+def to_flat(config) -> dict:
+    from tpvp.config import flatten_keys
+
+    return flatten_keys(to_dict(config))
+
+
+# --------------------------------------------------------------------------------------------------
+# instances and cases
+# --------------------------------------------------------------------------------------------------
+
+
+def generated_instances(seeds=GENERATED_SEEDS, species=SPECIES) -> list[Instance]:
+    """The default offline instances: generated tomato and maize pairs with fixed seeds."""
+    return [Instance(f"{sp}-generated-{seed}", sp, "generated", seed) for sp in species for seed in seeds]
+
+
+def bundled_instance() -> Instance:
+    """The bundled real tomato pair (Pheno4D 03-05 -> 03-06), reported on its own rows."""
+    return Instance("tomato-real-0305-0306", "tomato", "bundled")
+
+
+def dataset_instances(folder, plants=None, pairs=None, paper_subset: bool = False) -> list[Instance]:
+    """Every pair of a prepared dataset's ``pairs.csv`` (or the selected ``plants`` / ``pairs``
+    row numbers; ``paper_subset``: plants 1-3 of each species, their first pair)."""
+    folder = Path(folder)
+    table_path = folder / "pairs.csv"
+    if not table_path.is_file():
+        raise InputFileError(f"{folder}: no pairs.csv; prepare the dataset with python -m data_tools pheno4d prepare")
+    try:
+        table = pd.read_csv(table_path)
+    except (OSError, ValueError, pd.errors.ParserError) as exc:
+        raise InputFileError(f"{table_path}: not a readable pairs table ({exc})") from None
+    needed = {"plant", "species", "previous_date", "current_date", "previous_file", "current_file"}
+    if missing := needed - set(table.columns):
+        raise InputFileError(f"{table_path}: missing columns {', '.join(sorted(missing))}")
+    table = table.reset_index(drop=True)
+    if plants:
+        table = table[table["plant"].isin(list(plants))]
+    if pairs:
+        table = table.loc[[i for i in pairs if i in table.index]]
+    if paper_subset:
+        number = table["plant"].map(lambda p: int(m.group(1)) if (m := re.search(r"(\d+)$", str(p))) else 0)
+        table = table[number.between(1, 3)].groupby("plant", sort=True).head(1)
+    if table.empty:
+        raise ConfigError(f"{table_path}: the selection (plants={plants}, pairs={pairs}, paper_subset={paper_subset}) "
+                          f"selects no pair")
+    out = []
+    for row in table.itertuples():
+        files = [folder / f for f in (row.previous_file, row.current_file)]
+        for f in files:
+            if not f.is_file():
+                raise InputFileError(f"{f}: listed in {table_path} but missing")
+        out.append(Instance(f"{row.plant}-{row.previous_date}-{row.current_date}", str(row.species).lower(),
+                            "dataset", 0, str(files[0]), str(files[1])))
+    return out
+
+
+ALL_METHODS = ("ours", "ours-no-inflation", "initial-view-only", "initial-view-only-no-inflation",
+               "one-shot-no-prior", "gmc", "optimum", "ma-scvp")
+
+
+def default_cases(quick: bool = False, dataset=None, plants=None, pairs=None, paper_subset: bool = False,
+                  view_spaces=VIEW_SPACES, rotations=ROTATIONS, initial_views=INITIAL_VIEWS,
+                  with_bundled: bool = True) -> list[Case]:
+    """The paper's protocol on the generated pairs (72 cases) plus the bundled real pair on its own
+    rows, or on a prepared dataset (``dataset``). ``quick``: one tomato and one maize pair,
+    rotation 0, initial view 17 (a few cases for notebooks and CI)."""
+    if dataset is not None:
+        instances = dataset_instances(dataset, plants, pairs, paper_subset)
+    else:
+        instances = generated_instances(seeds=(0,) if quick else GENERATED_SEEDS)
+        if with_bundled and not quick:
+            instances.append(bundled_instance())
+    if quick:
+        rotations, initial_views = rotations[:1], initial_views[:1]
+    return case_list(instances, view_spaces, rotations, initial_views)
+
+
+def case_list(instances, view_spaces=VIEW_SPACES, rotations=ROTATIONS, initial_views=INITIAL_VIEWS) -> list[Case]:
+    """Every combination, in a stable order."""
+    cases = [Case(i, v, float(r), int(k)) for v in view_spaces for i in instances for r in rotations for k in initial_views]
+    if not cases:
+        raise ConfigError("the case list is empty: give at least one instance, view space, rotation and initial view")
+    return cases
+
+
+# --------------------------------------------------------------------------------------------------
+# methods: scene + case config -> rows
+# --------------------------------------------------------------------------------------------------
+
+
+def _case_row(result, scene) -> dict:
+    from tpvp.metrics import chamfer_distance
+
+    return {"views": result.n_views, "coverage": result.coverage, "path_length_m": result.path_length,
+            "chamfer_before_mm": 1e3 * result.chamfer_before, "chamfer_after_mm": 1e3 * result.chamfer_after,
+            # Table IV: the transferred model against the current ground-truth surface
+            "chamfer_truth_mm": 1e3 * chamfer_distance(result.clouds["warped"], scene.current),
+            "optimal": bool(result.selection.optimal and result.tsp.optimal), "status": result.selection.status,
+            "seconds_planning": result.timings["planning"],
+            "seconds_total": sum(result.timings[k] for k in ("warm_up", "registration", "planning"))}
+
+
+def _one_shot(**overrides):
+    def method(scene, config):
+        from tpvp.experiments.single_plant import run_case
+
+        config = make_config("plant", to_flat(config) | overrides) if overrides else config
+        return [_case_row(run_case(scene, config), scene)]
+    return method
+
+
+PLANT_METHODS.register("ours", "the paper's method: warm-up NBV, registration, inflation, set cover, TSP")(_one_shot())
+PLANT_METHODS.register("ours-no-inflation", "planning on the aligned previous session only (Table III)")(
+    _one_shot(**{"inflation.enabled": False}))
+PLANT_METHODS.register("initial-view-only", "registration on the initial view, no warm-up NBV (Table IV)")(
+    _one_shot(**{"nbv.warm_up_views": 0}))
+PLANT_METHODS.register("initial-view-only-no-inflation", "initial view only, without inflation")(
+    _one_shot(**{"nbv.warm_up_views": 0, "inflation.enabled": False}))
+PLANT_METHODS.register("one-shot-no-prior", "set cover + TSP on the coarse reconstruction alone (no previous session)")(
+    _one_shot(**{"registration.method": "no-prior", "inflation.enabled": False}))
+
+
+@PLANT_METHODS.register("gmc", "GMC-style sequential NBV from the initial view; the whole 1..20 curve")
+def gmc(scene, config):
+    from tpvp.experiments.baselines import nbv_curve
+
+    curve = nbv_curve(scene, config, max_views=max(GMC_BUDGETS))
+    return [{"budget": int(row.views), "views": int(row.views), "coverage": row.coverage,
+             "path_length_m": row.path_length, "seconds_planning": float(curve["seconds"][:i + 1].sum())}
+            for i, row in enumerate(curve.itertuples())]
+
+
+@PLANT_METHODS.register("optimum", "the exact optimum with perfect knowledge of today's plant (100 % and 98 %)")
+def exact_optimum(scene, config):
+    from tpvp.experiments.baselines import optimum
+
+    table = optimum(scene, config, targets=(1.0, 0.98))
+    return [{"target": row.target, "views": int(row.views), "coverage": row.coverage, "path_length_m": row.path_length,
+             "optimal": bool(row.optimal), "gap": row.gap, "seconds_planning": row.seconds}
+            for row in table.itertuples()]
+
+
+@PLANT_METHODS.register("ma-scvp", "the learned one-shot baseline: pending until its issue lands")
+def ma_scvp(scene, config):
+    return [{"status": "pending"}]
+
+
+# --------------------------------------------------------------------------------------------------
+# tasks, cache, parallel runner
+# --------------------------------------------------------------------------------------------------
+
+
+def task_key(case: Case, method: str, config: PlantConfig) -> str:
+    payload = {"case": asdict(case), "method": method, "config": to_dict(case.config(config)), "version": __version__}
+    return hashlib.sha256(json.dumps(payload, sort_keys=True, default=str).encode()).hexdigest()[:20]
+
+
+@lru_cache(maxsize=2)
+def _scene(case_without_view: Case, config: PlantConfig):
+    from tpvp.experiments.single_plant import build_scene
+
+    previous, current = case_without_view.instance.load()
+    return build_scene(previous, current, config, names=(f"{case_without_view.instance.name} previous",
+                                                         f"{case_without_view.instance.name} current"))
+
+
+def run_task(case: Case, method: str, config: PlantConfig, cache_dir=None) -> pd.DataFrame:
+    """The rows of one (case, method), from the cache when present; written to it otherwise."""
+    path = Path(cache_dir) / f"{task_key(case, method, config)}.parquet" if cache_dir else None
+    if path is not None and path.is_file():
+        try:
+            return pd.read_parquet(path)
+        except (OSError, ValueError):
+            pass  # a damaged cache entry is recomputed (and replaced atomically)
+    function = PLANT_METHODS.get(method)
+    case_config = case.config(config)
+    t0 = time.perf_counter()
+    # The scene depends on the pair, view space and rotation only: shared by initial views and methods.
+    scene = _scene(replace(case, initial_view=0), replace(case_config, initial_view=0))
+    rows = function(scene, case_config)
+    seconds = time.perf_counter() - t0
+    table = pd.DataFrame([{**case.labels(), "method": method, **row, "seconds_task": seconds} for row in rows])
+    if path is not None:
+        from tpvp.io import atomic_write_bytes
+
+        atomic_write_bytes(path, table.to_parquet(index=False))
+    return table
+
+
+def run_experiments(cases, methods, config: PlantConfig | None = None, cache_dir=None, workers: int = 1,
+                    progress: bool = True) -> pd.DataFrame:
+    """Every (case, method) task, ``workers`` processes in parallel; the raw table of all rows."""
+    config = config or make_config("plant")
+    for method in methods:
+        PLANT_METHODS.get(method)  # an unknown name fails before any work
+    tasks = [(case, method) for case in cases for method in methods]
+    if not tasks:
+        raise ConfigError("no task: the case list or the method list is empty")
+    from tqdm.auto import tqdm
+
+    tables = []
+    bar = tqdm(total=len(tasks), desc="plant experiments", unit="task", disable=not progress)
+    if workers <= 1:
+        for case, method in tasks:
+            tables.append(run_task(case, method, config, cache_dir))
+            bar.update(1)
+    else:
+        with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("forkserver")) as pool:
+            futures = [pool.submit(run_task, case, method, config, cache_dir) for case, method in tasks]
+            for future in as_completed(futures):
+                tables.append(future.result())
+                bar.update(1)
+    bar.close()
+    raw = pd.concat(tables, ignore_index=True)
+    order = {m: i for i, m in enumerate(methods)}
+    return raw.sort_values(["view_space", "instance", "rotation_deg", "initial_view", "method"],
+                           key=lambda c: c.map(order) if c.name == "method" else c, kind="stable").reset_index(drop=True)
+
+
+# --------------------------------------------------------------------------------------------------
+# tables
+# --------------------------------------------------------------------------------------------------
+
+
+def _mean_std(frame: pd.DataFrame, by: list, columns=("views", "coverage", "path_length_m")) -> pd.DataFrame:
+    frame = frame.copy()
+    frame["coverage"] = 100 * frame["coverage"]
+    grouped = frame.groupby(by, sort=False, dropna=False)
+    out = grouped.size().rename("cases").to_frame()
+    for column in columns:
+        if column in frame:
+            out[f"{column}_mean"] = grouped[column].mean()
+            out[f"{column}_std"] = grouped[column].std(ddof=0)
+    return out.reset_index()
+
+
+def paper_values() -> pd.DataFrame:
+    return pd.read_csv(PAPER_TABLE)
+
+
+def tables(raw: pd.DataFrame) -> dict:
+    """Table I (per view space and method; GMC per budget), II (Ours per species and view space),
+    III (inflation ablation per species, both view spaces pooled), IV (Chamfer of the transferred
+    model to the ground truth: initial view only vs + one NBV), timing, optimum ratio. Rows of the
+    real bundled pair are kept apart from the generated ones (``source``)."""
+    raw = raw.copy()
+    for column in ("budget", "target", "status", "views", "coverage", "path_length_m", "chamfer_truth_mm",
+                   "chamfer_after_mm", "seconds_planning", "seconds_task"):
+        if column not in raw:
+            raw[column] = np.nan
+    pending = raw[raw["status"].eq("pending")]
+    done = raw.drop(pending.index)
+    gmc_rows = done[(done["method"] == "gmc") & done["budget"].isin(GMC_BUDGETS)]
+    one_shot = done[~done["method"].isin(["gmc", "optimum"])]
+    table1 = pd.concat([
+        _mean_std(gmc_rows, ["source", "view_space", "method", "budget"]),
+        _mean_std(one_shot, ["source", "view_space", "method"]),
+        _mean_std(done[done["method"] == "optimum"], ["source", "view_space", "method", "target"]),
+        pending.groupby(["source", "view_space", "method"]).size().rename("cases").reset_index().assign(status="pending"),
+    ], ignore_index=True)
+    table2 = _mean_std(done[done["method"] == "ours"], ["source", "species", "view_space"])
+    table3 = _mean_std(done[done["method"].isin(["ours", "ours-no-inflation"])], ["source", "species", "method"])
+    table4 = _mean_std(done[done["method"].isin(["ours", "initial-view-only"])], ["source", "method"],
+                       columns=("chamfer_truth_mm", "chamfer_after_mm"))
+    timing = _mean_std(done, ["source", "method"], columns=("seconds_planning", "seconds_task"))
+    return {"table1_coverage_effort": table1, "table2_plant_complexity": table2, "table3_inflation": table3,
+            "table4_registration": table4, "planning_time": timing, "optimum_ratio": optimum_ratio(done)}
+
+
+def optimum_ratio(done: pd.DataFrame) -> pd.DataFrame:
+    """Each one-shot method's views as a ratio to the exact optimum's views for 98 % coverage, for the
+    cases where the method reached at least 98 % (others are not compared)."""
+    optimum = done[done["method"] == "optimum"]
+    if optimum.empty:
+        return pd.DataFrame()
+    keys = ["instance", "view_space", "rotation_deg", "initial_view"]
+    best = optimum.pivot_table(index=keys, columns="target", values="views").reset_index()
+    rows = done[~done["method"].isin(["optimum", "gmc"])].merge(best, on=keys)
+    reference = np.where(rows["coverage"] >= 0.98, rows.get(0.98, np.nan), np.nan)
+    rows["optimum_views"] = reference
+    rows["views_ratio"] = rows["views"] / rows["optimum_views"]
+    return _mean_std(rows, ["source", "view_space", "method"], columns=("views", "optimum_views", "views_ratio"))
+
+
+def markdown(table: pd.DataFrame) -> str:
+    """A Markdown table with mean ± std columns merged."""
+    if table.empty:
+        return "(no rows: the methods this table needs were not run)\n"
+    table = table.copy()
+    for column in [c for c in table.columns if c.endswith("_mean")]:
+        base = column[: -len("_mean")]
+        std = table.get(f"{base}_std")
+        table[base] = [f"{m:.2f} ± {s:.2f}" if pd.notna(m) else "" for m, s in
+                       zip(table[column], std if std is not None else [np.nan] * len(table))]
+        table = table.drop(columns=[column] + ([f"{base}_std"] if std is not None else []))
+    header = "| " + " | ".join(map(str, table.columns)) + " |"
+    rule = "|" + "|".join("---" for _ in table.columns) + "|"
+    body = ["| " + " | ".join("" if (isinstance(v, float) and np.isnan(v)) else str(v) for v in row) + " |"
+            for row in table.itertuples(index=False)]
+    return "\n".join([header, rule, *body]) + "\n"
+
+
+def write_results(folder, raw: pd.DataFrame, config: PlantConfig | None = None) -> dict:
+    """The raw per-case table, every aggregated table (CSV + Markdown) and the paper's values, as
+    one published folder (whole or not at all)."""
+    from tpvp.config import config_yaml
+    from tpvp.io import atomic_write_text
+    from tpvp.io.publish import staged_folder
+    from tpvp.provenance import provenance
+
+    config = config or make_config("plant")
+    written = {}
+    with staged_folder(folder) as stage:
+        atomic_write_text(stage.folder / "raw_cases.csv", raw.to_csv(index=False))
+        atomic_write_text(stage.folder / "paper_values.csv", paper_values().to_csv(index=False))
+        for name, table in tables(raw).items():
+            atomic_write_text(stage.folder / f"{name}.csv", table.to_csv(index=False))
+            atomic_write_text(stage.folder / f"{name}.md", markdown(table))
+            written[name] = table
+        atomic_write_text(stage.folder / "config.yaml", config_yaml(config, "base configuration of the experiments"))
+        atomic_write_text(stage.folder / "provenance.json", json.dumps(provenance(config), indent=2) + "\n")
+    return written

@@ -1,0 +1,66 @@
+"""Figures of the experiments (offscreen PNG): the coverage-effort trade-off and per-species bars."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from tpvp.viz.figures import _save, plt
+
+_STYLE = {"ours": ("tab:red", "o"), "ours-no-inflation": ("tab:orange", "s"), "initial-view-only": ("tab:brown", "v"),
+          "initial-view-only-no-inflation": ("tab:pink", "^"), "one-shot-no-prior": ("tab:gray", "D"),
+          "optimum": ("black", "*")}
+
+
+def plot_coverage_effort(path, raw: pd.DataFrame, title: str = ""):
+    """Coverage vs number of views and vs path length, one row of panels per view space: the GMC
+    curve (mean over cases, band = std), each one-shot method's cases and mean, the exact optimum."""
+    spaces = list(dict.fromkeys(raw["view_space"]))
+    fig, axes = plt.subplots(len(spaces), 2, figsize=(11, 4.2 * len(spaces)), squeeze=False)
+    for row, space in zip(axes, spaces):
+        frame = raw[(raw["view_space"] == space) & raw["views"].notna()]
+        for ax, x in zip(row, ("views", "path_length_m")):
+            gmc = frame[frame["method"] == "gmc"]
+            if len(gmc):
+                curve = gmc.groupby("views")[["coverage", "path_length_m"]].agg(["mean", "std"])
+                xs = curve.index.to_numpy(float) if x == "views" else curve[(x, "mean")].to_numpy()
+                mean, std = 100 * curve[("coverage", "mean")], 100 * curve[("coverage", "std")].fillna(0)
+                ax.plot(xs, mean, color="tab:blue", label="GMC (sequential NBV), mean")
+                ax.fill_between(xs, mean - std, mean + std, color="tab:blue", alpha=0.15)
+            groups = [(m, frame[frame["method"] == m], m) for m in _STYLE if m != "optimum"]
+            if "target" in frame:
+                optimum = frame[frame["method"] == "optimum"]
+                groups += [("optimum", optimum[optimum["target"] == t], f"exact optimum for {100 * t:g} %")
+                           for t in sorted(optimum["target"].dropna().unique(), reverse=True)]
+            for method, points, label in groups:
+                if points.empty:
+                    continue
+                colour, marker = _STYLE[method]
+                if method == "optimum" and "98" in label:
+                    colour = "dimgray"
+                ax.scatter(points[x], 100 * points["coverage"], s=14, color=colour, marker=marker, alpha=0.35)
+                ax.scatter(points[x].mean(), 100 * points["coverage"].mean(), s=90, color=colour, marker=marker,
+                           edgecolor="black", label=f"{label} (mean of {len(points)})")
+            ax.set_xlabel("views (initial and warm-up included)" if x == "views" else "path length (m)")
+            ax.set_ylabel("coverage of the oracle set (%)")
+            ax.set_title(f"{space}: coverage vs {'views' if x == 'views' else 'path length'}")
+            ax.grid(alpha=0.3)
+            low = np.nanpercentile(100 * frame["coverage"], 5) if len(frame) else 80
+            ax.set_ylim(max(0.0, min(low, 95.0) - 2), 100.5)
+        row[0].legend(fontsize=7, loc="lower right")
+    if title:
+        fig.suptitle(title)
+    fig.tight_layout()
+    return _save(fig, path)
+
+
+def plot_species_bars(path, table: pd.DataFrame, value: str = "views", title: str = ""):
+    """Bars of ``<value>_mean`` (± std) per species and view space (Table II)."""
+    fig, ax = plt.subplots(figsize=(6, 4))
+    labels = [f"{r.species}\n{r.view_space}" for r in table.itertuples()]
+    ax.bar(labels, table[f"{value}_mean"], yerr=table[f"{value}_std"], color="tab:red", alpha=0.7, capsize=4)
+    ax.set_ylabel(value.replace("_", " "))
+    ax.set_title(title or f"Ours: {value} per species and view space")
+    ax.grid(axis="y", alpha=0.3)
+    fig.tight_layout()
+    return _save(fig, path)
