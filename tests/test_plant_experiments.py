@@ -105,3 +105,22 @@ def test_a_prepared_dataset_becomes_instances(tmp_path):
     assert len(previous) == len(pair.previous.points)
     with pytest.raises(ConfigError, match="selects no pair"):
         plants.dataset_instances(tmp_path, plants=["Maize09"])
+
+
+def test_the_same_rows_on_a_dask_cluster(tiny_cases, tmp_path, monkeypatch):
+    from distributed import Client, LocalCluster
+
+    monkeypatch.setattr(plants, "SCHEDULER_TIMEOUT_S", 2)
+    methods = ["one-shot-no-prior", "ma-scvp"]
+    local = plants.run_experiments(tiny_cases, methods, CONFIG, cache_dir=tmp_path / "local", progress=False)
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None) as cluster:
+        by_address = plants.run_experiments(tiny_cases, methods, CONFIG, cache_dir=tmp_path / "cluster",
+                                            progress=False, scheduler=cluster.scheduler_address)
+        with Client(cluster) as client:
+            by_client = plants.run_experiments(tiny_cases, methods, CONFIG, cache_dir=None, progress=False,
+                                               scheduler=client)
+    timings = [c for c in local.columns if c.startswith("seconds")]
+    for remote in (by_address, by_client):
+        pd.testing.assert_frame_equal(remote.drop(columns=timings), local.drop(columns=timings), check_dtype=False)
+    with pytest.raises(ConfigError, match="cannot reach the Dask scheduler"):
+        plants.run_experiments(tiny_cases[:1], ["ma-scvp"], CONFIG, progress=False, scheduler="tcp://127.0.0.1:1")

@@ -160,8 +160,10 @@ def _experiments_plants(args) -> int:
     cases = plants.default_cases(args.quick, args.dataset, args.plants, args.pairs, args.paper_subset,
                                  tuple(args.view_spaces), tuple(args.rotations), tuple(args.initial_views))
     methods = args.methods or list(plants.ALL_METHODS)
-    print(f"{len(cases)} cases x {len(methods)} methods on {args.workers} worker(s); cache {args.cache}")
-    raw = plants.run_experiments(cases, methods, config, cache_dir=args.cache, workers=args.workers)
+    where = f"the Dask cluster {args.scheduler}" if args.scheduler else f"{args.workers} local worker(s)"
+    print(f"{len(cases)} cases x {len(methods)} methods on {where}; cache {args.cache}")
+    raw = plants.run_experiments(cases, methods, config, cache_dir=args.cache, workers=args.workers,
+                                 scheduler=args.scheduler)
     written = plants.write_results(args.output, raw, config)
     print(plants.markdown(written["table1_coverage_effort"]))
     print(f"wrote {Path(args.output).absolute()}/ (raw_cases.csv, {', '.join(f'{n}.csv/.md' for n in written)}, "
@@ -252,6 +254,9 @@ def build_parser() -> argparse.ArgumentParser:
                             "initial-view-only-no-inflation, one-shot-no-prior, gmc, optimum, ma-scvp)")
     plant.add_argument("--quick", action="store_true", help="a few cases: one tomato and one maize pair, rotation 0, view 17")
     plant.add_argument("--workers", type=int, default=2, help="parallel processes (default: %(default)s)")
+    plant.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                       help="run the tasks on a Dask cluster, e.g. tcp://10.0.0.5:8786 (the cache folder must be "
+                            "shared with its workers; default: local processes)")
     plant.add_argument("--cache", default="outputs/cache/plants",
                        help="cache folder of per-task rows; an interrupted run resumes (default: %(default)s)")
     plant.set_defaults(func=_experiments_plants)

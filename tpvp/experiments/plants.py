@@ -34,6 +34,7 @@ ROTATIONS = (0.0, 45.0)
 INITIAL_VIEWS = (17, 8, 21)
 VIEW_SPACES = ("hemisphere", "sphere")
 GMC_BUDGETS = (5, 10, 15, 20)
+SCHEDULER_TIMEOUT_S = 30  # connecting to a Dask scheduler
 PAPER_TABLE = Path(__file__).resolve().parent.parent / "data" / "paper" / "individual_plant.csv"
 
 PLANT_METHODS = Registry("plant experiment method")
@@ -278,8 +279,10 @@ def run_task(case: Case, method: str, config: PlantConfig, cache_dir=None) -> pd
 
 
 def run_experiments(cases, methods, config: PlantConfig | None = None, cache_dir=None, workers: int = 1,
-                    progress: bool = True) -> pd.DataFrame:
-    """Every (case, method) task, ``workers`` processes in parallel; the raw table of all rows."""
+                    progress: bool = True, scheduler=None) -> pd.DataFrame:
+    """Every (case, method) task, ``workers`` processes in parallel, or on a Dask cluster when
+    ``scheduler`` is given (an address ``tcp://host:8786`` or a ``distributed.Client``; the cache
+    folder must then be one the workers share); the raw table of all rows."""
     config = config or make_config("plant")
     for method in methods:
         PLANT_METHODS.get(method)  # an unknown name fails before any work
@@ -289,8 +292,15 @@ def run_experiments(cases, methods, config: PlantConfig | None = None, cache_dir
     from tqdm.auto import tqdm
 
     tables = []
+    client, own = _connect(scheduler) if scheduler is not None else (None, False)
     bar = tqdm(total=len(tasks), desc="plant experiments", unit="task", disable=not progress)
-    if workers <= 1:
+    if client is not None:
+        try:
+            tables = _run_on_cluster(tasks, config, cache_dir, client, bar)
+        finally:
+            if own:
+                client.close()
+    elif workers <= 1:
         for case, method in tasks:
             tables.append(run_task(case, method, config, cache_dir))
             bar.update(1)
@@ -305,6 +315,32 @@ def run_experiments(cases, methods, config: PlantConfig | None = None, cache_dir
     order = {m: i for i, m in enumerate(methods)}
     return raw.sort_values(["view_space", "instance", "rotation_deg", "initial_view", "method"],
                            key=lambda c: c.map(order) if c.name == "method" else c, kind="stable").reset_index(drop=True)
+
+
+def _connect(scheduler):
+    """``(client, whether we opened it)`` for a Dask scheduler address or an existing Client."""
+    try:
+        from distributed import Client
+    except ImportError:
+        raise ConfigError("--scheduler needs the package 'distributed' (pip install distributed)") from None
+    if isinstance(scheduler, Client):
+        return scheduler, False
+    try:
+        return Client(scheduler, timeout=SCHEDULER_TIMEOUT_S), True
+    except (OSError, TimeoutError) as exc:
+        raise ConfigError(f"cannot reach the Dask scheduler {scheduler!r}: {exc}") from None
+
+
+def _run_on_cluster(tasks, config, cache_dir, client, bar) -> list:
+    """The tasks on a dask.distributed cluster (we write no scheduler: Dask's runs them)."""
+    from distributed import as_completed as completed
+
+    futures = [client.submit(run_task, case, method, config, cache_dir, pure=False) for case, method in tasks]
+    tables = []
+    for future in completed(futures):
+        tables.append(future.result())
+        bar.update(1)
+    return tables
 
 
 # --------------------------------------------------------------------------------------------------
@@ -348,6 +384,7 @@ def tables(raw: pd.DataFrame) -> dict:
         _mean_std(done[done["method"] == "optimum"], ["source", "view_space", "method", "target"]),
         pending.groupby(["source", "view_space", "method"]).size().rename("cases").reset_index().assign(status="pending"),
     ], ignore_index=True)
+    table1["budget"] = table1["budget"].astype("Int64")
     table2 = _mean_std(done[done["method"] == "ours"], ["source", "species", "view_space"])
     table3 = _mean_std(done[done["method"].isin(["ours", "ours-no-inflation"])], ["source", "species", "method"])
     table4 = _mean_std(done[done["method"].isin(["ours", "initial-view-only"])], ["source", "method"],
