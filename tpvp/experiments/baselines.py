@@ -134,13 +134,39 @@ def nbv_curve(scene, config: PlantConfig = PlantConfig(), max_views: int = 20) -
     return pd.DataFrame(rows, columns=list(NBV_COLUMNS))
 
 
+def _greedy_order(visibility, initial: int) -> list:
+    """Views in greedy order (most new voxels first, ties to the lowest index) after ``initial``."""
+    matrix = sparse.csr_matrix(visibility, dtype=np.float64)
+    uncovered = np.ones(matrix.shape[1])
+    uncovered[matrix[initial].indices] = 0.0
+    order, free = [], np.ones(matrix.shape[0], dtype=bool)
+    free[initial] = False
+    while free.any():
+        gains = np.where(free, matrix @ uncovered, -1.0)
+        best = int(np.argmax(gains))
+        if gains[best] <= 0:
+            break
+        order.append(best)
+        free[best] = False
+        uncovered[matrix[best].indices] = 0.0
+    return order
+
+
 def _min_views_for_target(visibility, initial: int, required: int, config):
     """Smallest k whose max coverage (initial view executed) reaches ``required`` voxels.
 
     Returns (selected, proven, lower bound on k, status)."""
     n_views = visibility.shape[0]
     lower = 1  # smallest k not yet proven insufficient
+    greedy = _greedy_order(visibility, initial)
     for k in range(1, n_views):
+        covered = visibility[[initial, *greedy[:k]]].indices
+        if np.unique(covered).size >= required:
+            # k views suffice (greedy shows it); minimal if every smaller k was proven insufficient.
+            proven = lower == k
+            status = (f"greedy k={k} reaches the target; k={k - 1} proven insufficient" if proven else
+                      f"greedy k={k} reaches the target; k >= {lower} proven only (time limit)")
+            return np.sort(np.asarray(greedy[:k], dtype=np.int64)), proven, lower, status
         result = max_coverage(visibility, k, executed=[initial], config=config)
         if result.covered >= required:
             proven = lower == k
