@@ -21,7 +21,9 @@ initial view, then on the ground-truth visibility restricted to the oracle voxel
 * target 1.0: the minimum set cover (:func:`tpvp.setcover.solve_set_cover`);
 * target < 1: the smallest k whose maximum coverage with k further views
   (:func:`tpvp.setcover.maxcover.max_coverage`; the initial view's voxels count) reaches
-  ``ceil(target x |oracle|)`` voxels, trying k = 1, 2, ...;
+  ``ceil(target x |oracle|)`` voxels, trying k = 1, 2, ...; when the greedy selection of k views
+  already reaches it, no ILP is needed for that k (k is minimal once every smaller k is proven
+  insufficient by an optimal max-coverage ILP);
 
 then the exact shortest open path from the initial view through the chosen views
 (:func:`tpvp.path.tsp.shortest_open_path` on :func:`tpvp.path.local.local_path_lengths`). The
