@@ -181,10 +181,13 @@ def test_greedy_fallback_when_the_solver_finds_nothing(monkeypatch):
 
 
 def test_cbc_log_parsing():
+    from tpvp.solvers import parse_cbc_log
+
     log = ("Result - Stopped on time limit\n\nObjective value:                12.00000000\n"
            "Lower bound:                    10.400\nGap:                            0.15\n")
-    parsed = ilp_mod._parse_cbc_log(log)
-    assert parsed == {"result": "Stopped on time limit", "objective": 12.0, "bound": 10.4}
+    parsed = parse_cbc_log(log)
+    assert parsed == {"result": "Stopped on time limit", "objective": 12.0, "lower_bound": 10.4}
+    assert parse_cbc_log("Upper bound:   7.5\n") == {"upper_bound": 7.5}
 
 
 def test_bad_input_raises_config_error():

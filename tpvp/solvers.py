@@ -91,3 +91,34 @@ def highspy_module():
         raise ConfigError("solver 'highs' needs the highspy package (pip install highspy), "
                           "or use solver='cbc'") from exc
     return highspy
+
+
+def parse_cbc_log(text: str) -> dict:
+    """``result`` (CBC's "Result - ..." words), ``objective``, and ``lower_bound`` /
+    ``upper_bound`` from the "Lower bound:" / "Upper bound:" lines of a CBC log, where present."""
+    import re
+
+    out = {}
+    m = re.search(r"^Result - (.+)$", text, re.MULTILINE)
+    if m:
+        out["result"] = m.group(1).strip()
+    for key, label in (("objective", "Objective value"), ("lower_bound", "Lower bound"), ("upper_bound", "Upper bound")):
+        m = re.search(rf"^{label}:\s*([-+0-9.eE]+)", text, re.MULTILINE)
+        if m:
+            out[key] = float(m.group(1))
+    return out
+
+
+def solve_with_cbc_log(problem, time_limit: float, threads: int = 1, **options) -> dict:
+    """Solve a PuLP ``problem`` with CBC and return :func:`parse_cbc_log` of its log (the log is
+    the only place CBC states its proven bound)."""
+    import tempfile
+
+    fd, log_path = tempfile.mkstemp(prefix="tpvp_cbc_", suffix=".log")
+    os.close(fd)
+    try:
+        problem.solve(milp_solver("cbc", time_limit, threads, logPath=log_path, **options))
+        with open(log_path, errors="replace") as fh:
+            return parse_cbc_log(fh.read())
+    finally:
+        os.remove(log_path)

@@ -23,9 +23,6 @@ from __future__ import annotations
 
 import itertools
 import math
-import os
-import re
-import tempfile
 import time
 from dataclasses import dataclass
 
@@ -33,7 +30,7 @@ import numpy as np
 from scipy import sparse
 
 from tpvp.errors import ConfigError
-from tpvp.solvers import check_solver_settings, highspy_module, milp_solver
+from tpvp.solvers import check_solver_settings, highspy_module, solve_with_cbc_log
 
 # Cap on the entries of one chunk of the (sets x sets) intersection-count product; bounds memory of
 # the dominance test on large instances.
@@ -238,18 +235,6 @@ def _greedy(b: sparse.csr_matrix) -> np.ndarray:
     return np.asarray(sorted(chosen), dtype=np.int64)
 
 
-def _parse_cbc_log(text: str) -> dict:
-    out = {}
-    m = re.search(r"^Result - (.+)$", text, re.MULTILINE)
-    if m:
-        out["result"] = m.group(1).strip()
-    for key, label in (("objective", "Objective value"), ("bound", "Lower bound")):
-        m = re.search(rf"^{label}:\s*([-+0-9.eE]+)", text, re.MULTILINE)
-        if m:
-            out[key] = float(m.group(1))
-    return out
-
-
 def _solve_cbc(b: sparse.csr_matrix, config: SetCoverConfig):
     import pulp
 
@@ -261,24 +246,15 @@ def _solve_cbc(b: sparse.csr_matrix, config: SetCoverConfig):
     for i in range(b.shape[0]):
         expr = pulp.LpAffineExpression([(x[j], 1) for j in indices[indptr[i]:indptr[i + 1]]])
         prob.addConstraint(pulp.LpConstraint(expr, pulp.LpConstraintGE, f"c{i}", 1))
-    fd, log_path = tempfile.mkstemp(prefix="tpvp_cbc_", suffix=".log")
-    os.close(fd)
-    try:
-        # gapAbs < 1 is an exact stopping rule: the objective is integral, so a gap below 1 proves
-        # the incumbent optimal.
-        solver = milp_solver("cbc", config.time_limit, config.threads, gapRel=0.0, gapAbs=0.999,
-                             logPath=log_path)
-        prob.solve(solver)
-        with open(log_path, errors="replace") as fh:
-            log = _parse_cbc_log(fh.read())
-    finally:
-        os.remove(log_path)
+    # gapAbs < 1 is an exact stopping rule: the objective is integral, so a gap below 1 proves
+    # the incumbent optimal.
+    log = solve_with_cbc_log(prob, config.time_limit, config.threads, gapRel=0.0, gapAbs=0.999)
     values = np.array([v.value() if v.value() is not None else 0.0 for v in x])
     has_solution = prob.sol_status in (pulp.LpSolutionOptimal, pulp.LpSolutionIntegerFeasible)
     result = log.get("result", pulp.LpStatus[prob.status])
     optimal = prob.sol_status == pulp.LpSolutionOptimal and result.startswith("Optimal")
     chosen = np.flatnonzero(values > 0.5) if has_solution else None
-    bound = log.get("bound")
+    bound = log.get("lower_bound")
     return chosen, optimal, bound, result
 
 

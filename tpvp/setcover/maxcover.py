@@ -29,9 +29,6 @@ redundant); this never changes the objective.
 from __future__ import annotations
 
 import math
-import os
-import re
-import tempfile
 import time
 from dataclasses import dataclass
 
@@ -40,7 +37,7 @@ from scipy import sparse
 
 from tpvp.errors import ConfigError
 from tpvp.setcover.ilp import SetCoverConfig, _as_view_indices, _as_visibility
-from tpvp.solvers import milp_solver
+from tpvp.solvers import milp_solver, solve_with_cbc_log
 
 # Voxels per chunk when bit-packing view sets (bounds the dense (chunk, views) block).
 _PACK_CHUNK = 200_000
@@ -146,20 +143,6 @@ def _prune(members: sparse.csr_matrix, weights: np.ndarray, chosen: np.ndarray) 
     return chosen[keep]
 
 
-def _parse_cbc_log(text: str) -> dict:
-    out = {}
-    m = re.search(r"^Result - (.+)$", text, re.MULTILINE)
-    if m:
-        out["result"] = m.group(1).strip()
-    m = re.search(r"^Objective value:\s*([-+0-9.eE]+)", text, re.MULTILINE)
-    if m:
-        out["objective"] = float(m.group(1))
-    m = re.search(r"^(Lower|Upper) bound:\s*([-+0-9.eE]+)", text, re.MULTILINE)
-    if m:
-        out["bound_label"], out["bound"] = m.group(1), float(m.group(2))
-    return out
-
-
 def _solve(members: sparse.csr_matrix, weights: np.ndarray, k: int, integral: bool, config: SetCoverConfig):
     """Solve the reduced ILP with PuLP. Returns (chosen columns or None, optimal, upper bound or
     None, status)."""
@@ -180,23 +163,12 @@ def _solve(members: sparse.csr_matrix, weights: np.ndarray, k: int, integral: bo
     # With integral weights the objective is an integer: a gap below 1 proves the incumbent optimal.
     gap_abs = 0.999 if integral else 0.0
     if config.solver == "cbc":
-        fd, log_path = tempfile.mkstemp(prefix="tpvp_maxcover_", suffix=".log")
-        os.close(fd)
-        try:
-            solver = milp_solver("cbc", config.time_limit, config.threads, gapRel=0.0, gapAbs=gap_abs,
-                                 logPath=log_path)
-            prob.solve(solver)
-            with open(log_path, errors="replace") as fh:
-                log = _parse_cbc_log(fh.read())
-        finally:
-            os.remove(log_path)
+        log = solve_with_cbc_log(prob, config.time_limit, config.threads, gapRel=0.0, gapAbs=gap_abs)
         status = log.get("result", pulp.LpStatus[prob.status])
         optimal = prob.sol_status == pulp.LpSolutionOptimal and status.startswith("Optimal")
         # With -max CBC prints "Upper bound" in the maximised sense; a "Lower bound" line would be
         # that of the negated (minimised) objective.
-        bound = log.get("bound")
-        if bound is not None and log.get("bound_label") == "Lower":
-            bound = -bound
+        bound = log.get("upper_bound", -log["lower_bound"] if "lower_bound" in log else None)
     else:
         solver = milp_solver("highs", config.time_limit, config.threads, gapRel=0.0, gapAbs=gap_abs,
                              random_seed=0)
