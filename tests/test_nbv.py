@@ -18,7 +18,7 @@ from tpvp.nbv import (
 from tpvp.nbv.occupancy import MODE_GAIN, MODE_VISIBILITY, walk
 from tpvp.scene import voxels
 from tpvp.sensor import bruteforce
-from tpvp.sensor.camera import look_at_rotation, pixel_ray_directions
+from tpvp.sensor.camera import D435, Intrinsics, look_at_rotation, pixel_ray_directions
 from tpvp.sensor.grid import build_grid
 from tpvp.sensor.raycast import cast_ray, encode_key_jit
 
@@ -280,6 +280,9 @@ def test_gain_matches_bruteforce(seed):
         gains[max_range] = information_gain(m, positions, look_ats, stride=40, max_range=max_range)
         expected = [bruteforce_gain(m, p, t, 40, max_range) for p, t in zip(positions, look_ats)]
         np.testing.assert_array_equal(gains[max_range], expected)
+        # The walk (the reference kernel) agrees too.
+        np.testing.assert_array_equal(information_gain(m, positions, look_ats, stride=40, max_range=max_range,
+                                                       reference=True), expected)
     assert gains[1.0][-1] == 0 and np.all(gains[1.0][:5] > 0)
     assert np.all(gains[0.27] <= gains[1.0]) and np.any(gains[0.27] < gains[1.0])  # range bites
     # Visibility-weighted expected gain.
@@ -480,3 +483,102 @@ def test_voxel_codes_round_trip_and_range():
     for bad in ([lim, 0, 0], [0, -lim - 1, 0], [0, 0, 2**40]):
         with pytest.raises(PointCloudError, match="encodable range"):
             voxels.encode_keys(np.array([[1, 2, 3], bad]))
+
+
+def test_gain_by_voxel_equals_walk_on_ties():
+    """The default (by-voxel) gain equals the walk exactly where the DDA's tie rules decide:
+    power-of-two voxels, camera positions and intrinsics make rays cross voxel edges and corners
+    exactly (changing any tie rule of the by-voxel test, its candidate-ray margin or its handling
+    of voxels at the camera plane makes this fail). Cameras inside the map too."""
+    rng = np.random.default_rng(5)
+    res = 2.0 ** -7
+    dyadic = Intrinsics(fx=64.0, fy=64.0, cx=32.0, cy=32.0, width=65, height=65)
+    compared = 0
+    for trial in range(12):
+        centre = rng.integers(-3, 3, 3) * res if trial % 2 else rng.normal(scale=0.01, size=3)
+        m = OccupancyMap.empty(centre, 16 * res)
+        p_occ, p_free = (0.0, 0.005, 0.03, 0.1)[trial % 4], (0.2, 0.6, 0.9)[trial % 3]
+        r = rng.random(m.shape)
+        m = dataclasses.replace(m, state=np.where(
+            r < p_occ, OCCUPIED, np.where(r < p_occ + p_free, FREE, UNKNOWN)).astype(np.uint8))
+        positions, look_ats = [], []
+        for axis, sign in [(a, s) for a in range(3) for s in (-1, 1)]:  # along the axes
+            p = np.zeros(3)
+            p[axis] = sign * rng.integers(30, 80) * res
+            p[(axis + 1) % 3] = rng.integers(-5, 5) * res
+            positions.append(p)
+            look_ats.append(p - sign * 0.3 * np.eye(3)[axis])
+        for _ in range(3):  # along the diagonals
+            positions.append(rng.choice([-1, 1], 3) * rng.integers(20, 60) * res)
+            look_ats.append(np.zeros(3))
+        for _ in range(3):  # inside the map, looking anywhere
+            positions.append(m.centre + rng.normal(scale=0.05, size=3))
+            look_ats.append(rng.normal(size=3))
+        for intrinsics, stride in ((dyadic, int(rng.choice([1, 3, 4]))), (D435, 16)):
+            max_range = (1.0, 0.3, 0.17)[trial % 3]
+            fast = information_gain(m, positions, look_ats, stride=stride, max_range=max_range,
+                                    intrinsics=intrinsics)
+            walked = information_gain(m, positions, look_ats, stride=stride, max_range=max_range,
+                                      intrinsics=intrinsics, reference=True)
+            np.testing.assert_array_equal(fast, walked)
+            assert fast.dtype == walked.dtype == np.int64
+            compared += int((walked > 0).sum())
+    assert compared > 100
+
+
+def test_incremental_map_equals_rebuild(tomato_scene, monkeypatch):
+    """GeometricNbv integrates new views into its map while the map's geometry (sized on all
+    observed points) stays; it equals the map rebuilt from every view, and the choices and gains
+    equal those of rebuilding after every view with the walk's gains (the previous path)."""
+    from tpvp.config import NbvConfig
+    from tpvp.nbv.methods import GeometricNbv, NbvContext
+    from tpvp.sensor.sensor import SensorConfig, observe
+    from tpvp.viewspace import get_view_space
+
+    grid, _ = tomato_scene
+    space = get_view_space("hemisphere")
+    centre = np.zeros(3)
+    context = NbvContext(space, centre, SensorConfig(), NbvConfig(pixel_stride=8))
+
+    def observation(view, step):
+        points = grid.centres[observe(grid, space.positions[view], space.look_ats[view])]
+        if step == 3:  # a return farther out than any before: the map's geometry changes
+            points = np.concatenate([points, [[0.0, 0.0, 1.2 * np.sqrt((points ** 2).sum(axis=1)).max()]]])
+        return points
+
+    def run(nbv, reference):
+        maps, choices, view = [], [], 17
+        for step in range(7):
+            nbv.integrate(view, observation(view, step))
+            if step == 4:  # two views before the next map: both integrated
+                nbv.integrate(view + 1, observation(view + 1, step))
+            maps.append(nbv.occupancy)
+            if reference:
+                gains = information_gain(nbv.occupancy, space.positions, space.look_ats, stride=8,
+                                         reference=True)
+                view = int(np.argmax(np.where(nbv.view_state, -1, gains)))
+            else:
+                choice = nbv.next_view()
+                view, gains = choice.view, choice.scores
+            choices.append((view, gains))
+        return maps, choices
+
+    rebuilds = []
+    original = OccupancyMap.from_observations.__func__
+    monkeypatch.setattr(OccupancyMap, "from_observations", classmethod(
+        lambda cls, *args, **kwargs: rebuilds.append(1) or original(cls, *args, **kwargs)))
+    fast_maps, fast_choices = run(GeometricNbv(context), reference=False)
+    assert len(rebuilds) == 2  # the first map and the geometry change; 5 maps were incremental
+    slow_maps, slow_choices = run(GeometricNbv(context, incremental=False), reference=True)
+    assert len(rebuilds) == 2 + 7
+    geometries = set()
+    for fast, slow in zip(fast_maps, slow_maps):
+        np.testing.assert_array_equal(fast.state, slow.state)
+        assert fast.predicted_size == slow.predicted_size and fast.resolution == slow.resolution
+        np.testing.assert_array_equal(fast.origin_key, slow.origin_key)
+        geometries.add((fast.resolution, tuple(fast.origin_key), fast.shape))
+    assert len(geometries) == 2
+    for (view, gains), (view_slow, gains_slow) in zip(fast_choices, slow_choices):
+        assert view == view_slow
+        np.testing.assert_array_equal(gains, gains_slow)
+    assert fast_choices[0][1].max() > 1000 and len({v for v, _ in fast_choices}) == 7

@@ -51,6 +51,23 @@ def test_tables_hold_every_method_row(raw):
     assert "| ours |" in plants.markdown(out["table1_coverage_effort"])
 
 
+def test_results_folder_holds_tables_figures_and_the_comparison(raw, tiny_cases, tmp_path):
+    table, _ = raw
+    case = plants.comparison_case(tiny_cases)
+    plants.write_results(tmp_path / "out", table, CONFIG, comparison=case)
+    out = tmp_path / "out"
+    for name in ("raw_cases.csv", "table1_coverage_effort.md", "figures/coverage_effort_generated.png",
+                 "figures/views_per_species_generated.png", "comparison/comparison.png", "comparison/comparison.rrd"):
+        assert (out / name).is_file() and (out / name).stat().st_size > 0, name
+    compared = pd.read_csv(out / "comparison" / "comparison.csv")
+    assert list(compared["method"]) == ["gmc", "ours", "optimum"]
+    assert compared["views"].nunique() == 1  # a matched view count
+    for row in compared.itertuples():
+        assert int(row.order.split()[0]) == case.initial_view  # the same initial view
+    # nothing with that many views sees more than the optimum
+    assert compared["coverage"].max() == pytest.approx(compared.set_index("method").loc["optimum", "coverage"])
+
+
 def test_the_cache_is_reused_and_an_interrupted_run_resumes(raw, tiny_cases, monkeypatch):
     table, cache = raw
     files = sorted(cache.glob("*.parquet"))
@@ -72,6 +89,25 @@ def test_the_cache_is_reused_and_an_interrupted_run_resumes(raw, tiny_cases, mon
     # a changed configuration never reuses rows
     changed = make_config("plant", {"registration.embedded_deformation.iterations": 21})
     assert plants.task_key(tiny_cases[0], "ours", changed) != plants.task_key(tiny_cases[0], "ours", CONFIG)
+
+
+def test_methods_sharing_a_registration_give_the_rows_of_separate_runs(raw, tiny_cases, monkeypatch):
+    """Ours and Ours w/o inflation share one warm-up + registration per process; run apart (a fresh
+    transfer each) they give the same rows."""
+    table, _ = raw
+    timings = [c for c in table.columns if c.startswith("seconds")]
+    case = tiny_cases[1]
+    for method in ("ours-no-inflation", "initial-view-only-no-inflation"):
+        plants._transfers.clear()
+        plants._transfers["scene"] = None
+        alone = plants.run_task(case, method, CONFIG).drop(columns=["seconds_task"])
+        shared = table[(table["method"] == method) & (table["initial_view"] == case.initial_view)]
+        columns = [c for c in alone.columns if c not in timings]
+        pd.testing.assert_frame_equal(alone[columns].reset_index(drop=True),
+                                      shared[columns].reset_index(drop=True), check_dtype=False)
+    before = plants.task_key(case, "ours", CONFIG)
+    monkeypatch.setattr(plants, "code_fingerprint", lambda: "changed code")
+    assert plants.task_key(case, "ours", CONFIG) != before  # changed code never reuses rows
 
 
 def test_bad_input_is_one_line(tmp_path, capsys):

@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 import torch
+from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
 from tpvp.errors import ConfigError, PointCloudError
@@ -11,7 +12,19 @@ from tpvp.registration import (
     axis_angle_to_matrix,
     register_embedded_deformation,
 )
-from tpvp.registration.embedded_deformation import _Adam, _anchors, _edges, _warp_numpy
+from tpvp.registration.embedded_deformation import (
+    _Adam,
+    _anchors,
+    _edges,
+    _grid_knn,
+    _kth_smallest,
+    _loss_and_gradient,
+    _optimise_autograd,
+    _register,
+    _rodrigues,
+    _torch_losses,
+    _warp_numpy,
+)
 from tpvp.scene.normalise import normalise_plant
 from tpvp.scene.voxels import voxel_centroids
 from tpvp.synthetic.plants import generate_plant
@@ -113,6 +126,114 @@ def test_adam_is_torch_adam_with_exponential_lr():
     torch.testing.assert_close(p1, p2, rtol=0, atol=0)
 
 
+def test_numba_rodrigues_matches_torch():
+    rng = np.random.default_rng(5)
+    phi = np.concatenate([rng.normal(size=(20, 3)), rng.normal(size=(5, 3)) * 1e-6, np.zeros((1, 3))])
+    R = np.empty((len(phi), 3, 3))
+    _rodrigues(phi, R, np.empty(len(phi)), np.empty(len(phi)))
+    np.testing.assert_allclose(R, axis_angle_to_matrix(torch.as_tensor(phi)).numpy(), rtol=0, atol=1e-15)
+    np.testing.assert_array_equal(R[-1], np.eye(3))  # exact identity at zero
+
+
+@pytest.mark.parametrize("k", [1, 4, 9])
+def test_grid_knn_matches_kdtree(k):
+    rng = np.random.default_rng(6)
+    clouds = {
+        "plant-like": np.concatenate([rng.normal(size=(700, 3)) * [0.05, 0.05, 0.002],
+                                      rng.normal(size=(300, 3)) * [0.002, 0.002, 0.08]]),
+        "flat": np.c_[rng.uniform(0, 0.1, size=(300, 2)), np.zeros(300)],
+        "duplicates": np.repeat(rng.uniform(0, 0.01, size=(40, 3)), 3, axis=0),
+        "few": rng.uniform(0, 0.01, size=(k, 3)),
+    }
+    for name, ref in clouds.items():
+        queries = np.concatenate([ref[: len(ref) // 2] + rng.normal(size=(len(ref) // 2, 3)) * 0.003,
+                                  rng.uniform(-0.3, 0.3, size=(50, 3)),  # outside the grid, far away
+                                  ref[:10]])  # exact hits
+        idx = np.empty((len(queries), k), np.int64)
+        d2 = np.empty((len(queries), k))
+        _grid_knn(ref, queries, k, idx, d2)
+        d_ref, _ = cKDTree(ref).query(queries, k=k)
+        d_ref = d_ref.reshape(len(queries), k)
+        np.testing.assert_array_equal(np.sqrt(d2), d_ref, err_msg=name)  # the same distances, bit for bit
+        np.testing.assert_array_equal(((queries[:, None] - ref[idx]) ** 2).sum(-1), d2, err_msg=name)
+        assert np.all(np.diff(d2, axis=1) >= 0)
+
+
+def test_kth_smallest_is_torch_lower_median():
+    rng = np.random.default_rng(7)
+    for n in (1, 2, 7, 8, 1000):
+        values = np.round(rng.uniform(0, 1, size=n), 2)  # with ties
+        assert _kth_smallest(values, (n - 1) // 2) == torch.as_tensor(values).median().item()
+
+
+def _small_problem(n_p=300, n_q=250):
+    rng = np.random.default_rng(8)
+    plant = normalise_plant(generate_plant("tomato", 1).points).points
+    P = plant[rng.choice(len(plant), n_p, replace=False)]
+    Q = bend_twist(plant[rng.choice(len(plant), n_q, replace=False)])
+    config = EDConfig(node_coverage=0.02)
+    nodes = voxel_centroids(P, config.node_coverage)
+    e_idx, e_w = _edges(nodes, config.k_edges)
+    a_idx, a_w = _anchors(nodes, P, config)
+    M = len(nodes)
+    phi = rng.normal(size=(M, 3)) * 0.05
+    phi[:3] *= 1e-5  # the small-angle branch of Rodrigues
+    phi[3] = 0.0
+    t = rng.normal(size=(M, 3)) * 2e-3
+    sel = (rng.choice(n_p, 200, replace=False), rng.choice(n_q, 150, replace=False),
+           rng.choice(n_p, 200, replace=False))
+    return P, Q, nodes, e_idx, e_w, a_idx, a_w, phi, t, sel
+
+
+def _analytic(P, Q, nodes, e_idx, e_w, a_idx, a_w, phi, t, sel, config):
+    g_phi, g_t = np.zeros_like(phi), np.zeros_like(t)
+    g_ij = nodes[e_idx] - nodes[:, None, :]
+    terms = _loss_and_gradient(phi, t, P, Q, nodes, a_idx, a_w, e_idx, e_w, g_ij, *sel, config.w_arap,
+                               config.w_chamfer, config.w_laplacian, config.laplacian_in_gradient,
+                               config.laplacian_k, config.chamfer_truncation, g_phi, g_t)
+    return np.array(terms), g_phi, g_t
+
+
+@pytest.mark.parametrize("laplacian_in_gradient", [False, True])
+def test_analytic_gradient_equals_autograd(laplacian_in_gradient):
+    """The numba losses and hand-written gradient against the torch reference + autograd, at
+    random non-zero parameters (both Rodrigues branches, one node at exactly zero)."""
+    P, Q, nodes, e_idx, e_w, a_idx, a_w, phi, t, sel = _small_problem()
+    config = EDConfig(node_coverage=0.02, laplacian_in_gradient=laplacian_in_gradient, w_laplacian=0.5)
+    terms, g_phi, g_t = _analytic(P, Q, nodes, e_idx, e_w, a_idx, a_w, phi, t, sel, config)
+    phi_t = torch.tensor(phi, requires_grad=True)
+    t_t = torch.tensor(t, requires_grad=True)
+    total, *ref_terms = _torch_losses(P, Q, nodes, e_idx, e_w, a_idx, a_w, config)(phi_t, t_t, *sel)
+    ref_phi, ref_t = torch.autograd.grad(total, (phi_t, t_t))
+    np.testing.assert_allclose(terms, [x.item() for x in ref_terms], rtol=1e-13, atol=0)
+    assert np.all(terms > 0)
+    for mine, ref in ((g_phi, ref_phi.numpy()), (g_t, ref_t.numpy())):
+        assert np.abs(ref).max() > 0
+        np.testing.assert_allclose(mine, ref, rtol=0, atol=1e-12 * np.abs(ref).max())
+
+
+def test_analytic_gradient_equals_finite_differences():
+    """Independent of the torch code: central differences of w_arap L_arap + w_chamfer L_cd (the
+    nearest neighbours do not change for such small steps). The Laplacian is left out: its
+    gradient holds the weights W constant (reference), finite differences would not."""
+    P, Q, nodes, e_idx, e_w, a_idx, a_w, phi, t, sel = _small_problem()
+    config = EDConfig(node_coverage=0.02)
+    weights = np.array([config.w_arap, config.w_chamfer, 0.0])
+    _, g_phi, g_t = _analytic(P, Q, nodes, e_idx, e_w, a_idx, a_w, phi, t, sel, config)
+    rng = np.random.default_rng(9)
+    for params, grad, h in ((phi, g_phi, 1e-6), (t, g_t, 1e-8)):
+        for m in [0, 3] + list(rng.choice(len(nodes), 6, replace=False)):  # 0: small angle, 3: zero
+            for a in range(3):
+                old = params[m, a]
+                params[m, a] = old + h
+                up = _analytic(P, Q, nodes, e_idx, e_w, a_idx, a_w, phi, t, sel, config)[0] @ weights
+                params[m, a] = old - h
+                down = _analytic(P, Q, nodes, e_idx, e_w, a_idx, a_w, phi, t, sel, config)[0] @ weights
+                params[m, a] = old
+                fd = (up - down) / (2 * h)
+                assert abs(fd - grad[m, a]) <= 1e-6 * np.abs(grad).max(), (m, a, fd, grad[m, a])
+
+
 # ------------------------------------------------------------------------------------------------
 # registration
 # ------------------------------------------------------------------------------------------------
@@ -167,7 +288,27 @@ def test_deterministic_and_seeded(warped_pair):
     np.testing.assert_array_equal(a.losses, b.losses)
     c = register_embedded_deformation(P, Q, EDConfig(iterations=25, seed=1))
     assert not np.array_equal(a.warped, c.warped)
+    d = register_embedded_deformation(P, Q, EDConfig(iterations=25, threads=None))  # torch's own setting
+    np.testing.assert_array_equal(a.warped, d.warped)
     assert torch.get_num_threads() >= 1  # the thread setting is restored
+
+
+@pytest.mark.parametrize("config", [EDConfig(iterations=60),
+                                    EDConfig(iterations=30, laplacian_in_gradient=True, w_laplacian=10.0),
+                                    EDConfig(iterations=30, chamfer_samples=300, k_edges=3, k_anchors=2)])
+def test_equals_the_autograd_implementation(warped_pair, config):
+    """The analytic-gradient optimiser reproduces the torch-autograd one (the implementation it
+    replaced, kept as _optimise_autograd) up to rounding: same subsets, same steps."""
+    P, Q, _ = warped_pair
+    fast = register_embedded_deformation(P, Q, config)
+    ref = _register(P, Q, config, _optimise_autograd)
+    assert fast.iterations == ref.iterations == config.iterations
+    np.testing.assert_allclose(fast.warped, ref.warped, rtol=0, atol=1e-14)
+    np.testing.assert_allclose(fast.translations, ref.translations, rtol=0, atol=1e-14)
+    np.testing.assert_allclose(fast.rotations, ref.rotations, rtol=0, atol=1e-13)
+    np.testing.assert_allclose(fast.losses, ref.losses, rtol=1e-12, atol=0)
+    np.testing.assert_allclose(fast.loss_terms, ref.loss_terms, rtol=1e-12, atol=0)
+    assert np.abs(fast.warped - P).max() > 1e-3  # it did move
 
 
 def test_laplacian_flag(warped_pair):

@@ -164,10 +164,11 @@ def _experiments_plants(args) -> int:
     print(f"{len(cases)} cases x {len(methods)} methods on {where}; cache {args.cache}")
     raw = plants.run_experiments(cases, methods, config, cache_dir=args.cache, workers=args.workers,
                                  scheduler=args.scheduler)
-    written = plants.write_results(args.output, raw, config)
+    comparison = plants.comparison_case(cases) if args.comparison else None
+    written = plants.write_results(args.output, raw, config, comparison=comparison)
     print(plants.markdown(written["table1_coverage_effort"]))
     print(f"wrote {Path(args.output).absolute()}/ (raw_cases.csv, {', '.join(f'{n}.csv/.md' for n in written)}, "
-          f"paper_values.csv)")
+          f"paper_values.csv, figures/{', comparison/' if comparison else ''})")
     return 0
 
 
@@ -257,6 +258,9 @@ def build_parser() -> argparse.ArgumentParser:
     plant.add_argument("--scheduler", default=None, metavar="ADDRESS",
                        help="run the tasks on a Dask cluster, e.g. tcp://10.0.0.5:8786 (the cache folder must be "
                             "shared with its workers; default: local processes)")
+    plant.add_argument("--no-comparison", dest="comparison", action="store_false",
+                       help="skip the comparison figure (GMC, Ours and the exact optimum on the first sphere case, "
+                            "with a rerun recording; about 30 s)")
     plant.add_argument("--cache", default="outputs/cache/plants",
                        help="cache folder of per-task rows; an interrupted run resumes (default: %(default)s)")
     plant.set_defaults(func=_experiments_plants)

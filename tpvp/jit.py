@@ -25,7 +25,8 @@ def compile_kernels(greenhouse: bool = False) -> float:
     Covered: the sensor (reference and pixel models; single views, batches, depth images), the
     visibility matrix, the occupancy map's carving (point rays and pixel rays), the information
     gain (counts and visibility-weighted) and next-best view, and the open-path heuristic's local
-    search. ``greenhouse`` adds the greenhouse-row oracle (not used for single plants).
+    search, and the embedded-deformation registration's loss/gradient and nearest-neighbour kernels.
+    ``greenhouse`` adds the greenhouse-row oracle (not used for single plants).
     """
     from tpvp.nbv import OccupancyMap, information_gain, next_best_view
     from tpvp.path.tsp import TspConfig, shortest_open_path
@@ -60,6 +61,9 @@ def compile_kernels(greenhouse: bool = False) -> float:
 
     distance = np.abs(np.subtract.outer(np.arange(6.0), np.arange(6.0)))
     shortest_open_path(distance, 0, config=TspConfig(method="heuristic", kicks=1))
+    from tpvp.registration.embedded_deformation import compile_kernels as compile_registration
+
+    compile_registration()
     if greenhouse:
         greenhouse_oracle(grid, views, progress=False)
     return time.perf_counter() - start

@@ -122,3 +122,37 @@ def solve_with_cbc_log(problem, time_limit: float, threads: int = 1, **options) 
             return parse_cbc_log(fh.read())
     finally:
         os.remove(log_path)
+
+
+def solve_pulp_milp(problem, variables, solver: str, time_limit: float, threads: int = 1, gap_abs: float = 0.0):
+    """Solve a PuLP ``problem`` with CBC or HiGHS to a proven optimum (relative gap 0, absolute gap
+    ``gap_abs``) or the time limit. Returns ``(chosen, optimal, bound, status)``: the indices of the
+    binary ``variables`` set to 1 (None without an incumbent), whether optimality is proven, the
+    solver's proven bound in the problem's own sense (an upper bound when maximising; None when
+    not stated) and the solver's status words."""
+    import pulp
+
+    maximise = problem.sense == pulp.LpMaximize
+    if solver == "cbc":
+        log = solve_with_cbc_log(problem, time_limit, threads, gapRel=0.0, gapAbs=gap_abs)
+        status = log.get("result", pulp.LpStatus[problem.status])
+        optimal = problem.sol_status == pulp.LpSolutionOptimal and status.startswith("Optimal")
+        if maximise:
+            # With -max CBC prints "Upper bound" in the maximised sense; a "Lower bound" line would
+            # be that of the negated (minimised) objective.
+            bound = log.get("upper_bound", -log["lower_bound"] if "lower_bound" in log else None)
+        else:
+            bound = log.get("lower_bound")
+    else:
+        highspy = highspy_module()
+        problem.solve(milp_solver("highs", time_limit, threads, gapRel=0.0, gapAbs=gap_abs, random_seed=0))
+        highs = problem.solverModel
+        model_status = highs.getModelStatus()
+        status = highs.modelStatusToString(model_status)
+        optimal = model_status == highspy.HighsModelStatus.kOptimal
+        dual = float(highs.getInfo().mip_dual_bound)
+        # PuLP hands HiGHS the negated objective of a maximisation.
+        bound = (-dual if maximise else dual) if np.isfinite(dual) else None
+    has_solution = problem.sol_status in (pulp.LpSolutionOptimal, pulp.LpSolutionIntegerFeasible)
+    values = np.array([v.value() if v.value() is not None else 0.0 for v in variables])
+    return (np.flatnonzero(values > 0.5) if has_solution else None), bool(optimal), bound, str(status)

@@ -19,11 +19,8 @@ of the moves so far.
 initial view, then on the ground-truth visibility restricted to the oracle voxels
 
 * target 1.0: the minimum set cover (:func:`tpvp.setcover.solve_set_cover`);
-* target < 1: the smallest k whose maximum coverage with k further views
-  (:func:`tpvp.setcover.maxcover.max_coverage`; the initial view's voxels count) reaches
-  ``ceil(target x |oracle|)`` voxels, trying k = 1, 2, ...; when the greedy selection of k views
-  already reaches it, no ILP is needed for that k (k is minimal once every smaller k is proven
-  insufficient by an optimal max-coverage ILP);
+* target < 1: the fewest further views that, with the initial view, see ``ceil(target x |oracle|)``
+  oracle voxels: one partial set-cover ILP (:func:`tpvp.setcover.partial.partial_set_cover`);
 
 then the exact shortest open path from the initial view through the chosen views
 (:func:`tpvp.path.tsp.shortest_open_path` on :func:`tpvp.path.local.local_path_lengths`). The
@@ -50,7 +47,7 @@ from tpvp.nbv.methods import NbvContext, make_nbv
 from tpvp.path.local import local_path_lengths, obstacle_radius
 from tpvp.path.tsp import shortest_open_path
 from tpvp.setcover.ilp import solve_set_cover
-from tpvp.setcover.maxcover import max_coverage
+from tpvp.setcover.partial import partial_set_cover
 
 NBV_COLUMNS = ("views", "view", "coverage", "path_length", "seconds", "step_length", "radius")
 OPTIMUM_COLUMNS = ("target", "views", "coverage", "path_length", "optimal", "bound", "gap", "seconds",
@@ -136,50 +133,6 @@ def nbv_curve(scene, config: PlantConfig = PlantConfig(), max_views: int = 20) -
     return pd.DataFrame(rows, columns=list(NBV_COLUMNS))
 
 
-def _greedy_order(visibility, initial: int) -> list:
-    """Views in greedy order (most new voxels first, ties to the lowest index) after ``initial``."""
-    matrix = sparse.csr_matrix(visibility, dtype=np.float64)
-    uncovered = np.ones(matrix.shape[1])
-    uncovered[matrix[initial].indices] = 0.0
-    order, free = [], np.ones(matrix.shape[0], dtype=bool)
-    free[initial] = False
-    while free.any():
-        gains = np.where(free, matrix @ uncovered, -1.0)
-        best = int(np.argmax(gains))
-        if gains[best] <= 0:
-            break
-        order.append(best)
-        free[best] = False
-        uncovered[matrix[best].indices] = 0.0
-    return order
-
-
-def _min_views_for_target(visibility, initial: int, required: int, config):
-    """Smallest k whose max coverage (initial view executed) reaches ``required`` voxels.
-
-    Returns (selected, proven, lower bound on k, status)."""
-    n_views = visibility.shape[0]
-    lower = 1  # smallest k not yet proven insufficient
-    greedy = _greedy_order(visibility, initial)
-    for k in range(1, n_views):
-        covered = visibility[[initial, *greedy[:k]]].indices
-        if np.unique(covered).size >= required:
-            # k views suffice (greedy shows it); minimal if every smaller k was proven insufficient.
-            proven = lower == k
-            status = (f"greedy k={k} reaches the target; k={k - 1} proven insufficient" if proven else
-                      f"greedy k={k} reaches the target; k >= {lower} proven only (time limit)")
-            return np.sort(np.asarray(greedy[:k], dtype=np.int64)), proven, lower, status
-        result = max_coverage(visibility, k, executed=[initial], config=config)
-        if result.covered >= required:
-            proven = lower == k
-            status = (f"max coverage k={k}: {result.status}" if proven else
-                      f"max coverage k={k} reaches the target; k >= {lower} proven only (time limit)")
-            return result.selected, proven, lower, status
-        if result.optimal or result.bound < required:
-            lower = k + 1  # k views cannot reach the target
-    raise ConfigError(f"the coverage target ({required} voxels) cannot be reached by the view space")
-
-
 def optimum(scene, config: PlantConfig = PlantConfig(), targets=(1.0, 0.98)) -> pd.DataFrame:
     """The exact optimum with perfect knowledge of the current plant, one row per target.
 
@@ -215,13 +168,11 @@ def optimum(scene, config: PlantConfig = PlantConfig(), targets=(1.0, 0.98)) -> 
             bound = 1.0 + float(result.bound)
             status = f"set cover: {result.status}"
         else:
-            required = math.ceil(target * oracle.size - 1e-9)
-            if initial_covered.sum() >= required:
-                selected, selection_optimal, lower, status = np.zeros(0, np.int64), True, 0, "initial view suffices"
-            else:
-                selected, selection_optimal, lower, status = _min_views_for_target(
-                    visibility, initial, required, solver_config)
-            bound = 1.0 + float(lower)
+            result = partial_set_cover(visibility, math.ceil(target * oracle.size - 1e-9), executed=[initial],
+                                       config=solver_config)
+            selected, selection_optimal = result.selected, bool(result.optimal)
+            bound = 1.0 + float(result.bound)
+            status = f"partial set cover: {result.status}"
         stops = [initial, *[int(v) for v in selected]]
         tsp = shortest_open_path(local_path_lengths(space.positions[stops], centre, radius), start=0,
                                  config=config.path)

@@ -4,8 +4,8 @@ A *case* is one session pair of one plant in one view space, rotation and initia
 protocol: 2 species x 3 instances x 2 rotations x 3 initial views per view space). A *method* is a
 named entry of :data:`PLANT_METHODS` that turns a case's scene into result rows. Every
 (case, method) task is independent; its rows are cached on disk (Parquet, atomic writes) under a
-key hashing the case, the method, the resolved configuration and the package version, so a changed
-method never reuses stale rows, an interrupted run resumes, and a finished one re-renders instantly.
+key hashing the case, the method, the resolved configuration, the package version and its source
+code, so a changed method never reuses stale rows, an interrupted run resumes, and a finished one re-renders instantly.
 """
 
 from __future__ import annotations
@@ -191,12 +191,29 @@ def _case_row(result, scene) -> dict:
             "seconds_total": sum(result.timings[k] for k in ("warm_up", "registration", "planning"))}
 
 
+_transfers: dict = {"scene": None}  # this process's transfers of the last scene, by warm-up/registration settings
+
+
+def _shared_transfer(scene, config):
+    """The warm-up + registration of ``scene`` under ``config``, computed once per process: Ours and
+    Ours w/o inflation (and the two initial-view-only variants) differ only after registration."""
+    from tpvp.experiments.single_plant import transfer
+
+    if _transfers["scene"] is not scene:
+        _transfers.clear()
+        _transfers["scene"] = scene
+    key = (config.initial_view, repr(config.nbv), repr(config.registration))
+    if key not in _transfers:
+        _transfers[key] = transfer(scene, config)
+    return _transfers[key]
+
+
 def _one_shot(**overrides):
     def method(scene, config):
         from tpvp.experiments.single_plant import run_case
 
         config = make_config("plant", to_flat(config) | overrides) if overrides else config
-        return [_case_row(run_case(scene, config), scene)]
+        return [_case_row(run_case(scene, config, transferred=_shared_transfer(scene, config)), scene)]
     return method
 
 
@@ -241,8 +258,20 @@ def ma_scvp(scene, config):
 # --------------------------------------------------------------------------------------------------
 
 
+@lru_cache(maxsize=1)
+def code_fingerprint() -> str:
+    """A hash of the package's source files: a code change without a version change must not
+    reuse cached rows either."""
+    digest = hashlib.sha256()
+    root = Path(__file__).resolve().parent.parent
+    for path in sorted(root.rglob("*.py")):
+        digest.update(str(path.relative_to(root)).encode() + b"\0" + path.read_bytes())
+    return digest.hexdigest()[:16]
+
+
 def task_key(case: Case, method: str, config: PlantConfig) -> str:
-    payload = {"case": asdict(case), "method": method, "config": to_dict(case.config(config)), "version": __version__}
+    payload = {"case": asdict(case), "method": method, "config": to_dict(case.config(config)), "version": __version__,
+               "code": code_fingerprint()}
     return hashlib.sha256(json.dumps(payload, sort_keys=True, default=str).encode()).hexdigest()[:20]
 
 
@@ -278,38 +307,49 @@ def run_task(case: Case, method: str, config: PlantConfig, cache_dir=None) -> pd
     return table
 
 
+def run_case_tasks(case: Case, methods, config: PlantConfig, cache_dir=None) -> list:
+    """Every method of one case in this process (so they share its scene and registrations), each
+    method's rows cached on their own."""
+    return [run_task(case, method, config, cache_dir) for method in methods]
+
+
 def run_experiments(cases, methods, config: PlantConfig | None = None, cache_dir=None, workers: int = 1,
                     progress: bool = True, scheduler=None) -> pd.DataFrame:
     """Every (case, method) task, ``workers`` processes in parallel, or on a Dask cluster when
     ``scheduler`` is given (an address ``tcp://host:8786`` or a ``distributed.Client``; the cache
-    folder must then be one the workers share); the raw table of all rows."""
+    folder must then be one the workers share); the raw table of all rows. A case's methods run
+    together in one process; each (case, method) is cached on its own."""
     config = config or make_config("plant")
+    methods = list(methods)
     for method in methods:
         PLANT_METHODS.get(method)  # an unknown name fails before any work
-    tasks = [(case, method) for case in cases for method in methods]
-    if not tasks:
+    cases = list(cases)
+    if not cases or not methods:
         raise ConfigError("no task: the case list or the method list is empty")
     from tqdm.auto import tqdm
 
     tables = []
     client, own = _connect(scheduler) if scheduler is not None else (None, False)
-    bar = tqdm(total=len(tasks), desc="plant experiments", unit="task", disable=not progress)
+    bar = tqdm(total=len(cases) * len(methods), desc="plant experiments", unit="task", disable=not progress)
+
+    def collect(case_tables):
+        tables.extend(case_tables)
+        bar.update(len(case_tables))
+
     if client is not None:
         try:
-            tables = _run_on_cluster(tasks, config, cache_dir, client, bar)
+            _run_on_cluster(cases, methods, config, cache_dir, client, collect)
         finally:
             if own:
                 client.close()
     elif workers <= 1:
-        for case, method in tasks:
-            tables.append(run_task(case, method, config, cache_dir))
-            bar.update(1)
+        for case in cases:
+            collect(run_case_tasks(case, methods, config, cache_dir))
     else:
         with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("forkserver")) as pool:
-            futures = [pool.submit(run_task, case, method, config, cache_dir) for case, method in tasks]
+            futures = [pool.submit(run_case_tasks, case, methods, config, cache_dir) for case in cases]
             for future in as_completed(futures):
-                tables.append(future.result())
-                bar.update(1)
+                collect(future.result())
     bar.close()
     raw = pd.concat(tables, ignore_index=True)
     order = {m: i for i, m in enumerate(methods)}
@@ -331,16 +371,13 @@ def _connect(scheduler):
         raise ConfigError(f"cannot reach the Dask scheduler {scheduler!r}: {exc}") from None
 
 
-def _run_on_cluster(tasks, config, cache_dir, client, bar) -> list:
-    """The tasks on a dask.distributed cluster (we write no scheduler: Dask's runs them)."""
+def _run_on_cluster(cases, methods, config, cache_dir, client, collect) -> None:
+    """The cases on a dask.distributed cluster (we write no scheduler: Dask's runs them)."""
     from distributed import as_completed as completed
 
-    futures = [client.submit(run_task, case, method, config, cache_dir, pure=False) for case, method in tasks]
-    tables = []
+    futures = [client.submit(run_case_tasks, case, methods, config, cache_dir, pure=False) for case in cases]
     for future in completed(futures):
-        tables.append(future.result())
-        bar.update(1)
-    return tables
+        collect(future.result())
 
 
 # --------------------------------------------------------------------------------------------------
@@ -427,13 +464,23 @@ def markdown(table: pd.DataFrame) -> str:
     return "\n".join([header, rule, *body]) + "\n"
 
 
-def write_results(folder, raw: pd.DataFrame, config: PlantConfig | None = None) -> dict:
-    """The raw per-case table, every aggregated table (CSV + Markdown) and the paper's values, as
-    one published folder (whole or not at all)."""
+def comparison_case(cases) -> Case:
+    """The case of the comparison figure: the paper shows a sphere case; the first one listed (else
+    the first case)."""
+    cases = list(cases)
+    return next((c for c in cases if c.view_space == "sphere"), cases[0])
+
+
+def write_results(folder, raw: pd.DataFrame, config: PlantConfig | None = None, comparison: Case | None = None) -> dict:
+    """The raw per-case table, every aggregated table (CSV + Markdown), the paper's values, the
+    coverage-effort and per-species figures and, for a ``comparison`` case, the GMC / Ours /
+    optimum comparison (figure, table, rerun recording), as one published folder (whole or not at
+    all)."""
     from tpvp.config import config_yaml
     from tpvp.io import atomic_write_text
     from tpvp.io.publish import staged_folder
     from tpvp.provenance import provenance
+    from tpvp.viz.experiments import plot_coverage_effort, plot_species_bars
 
     config = config or make_config("plant")
     written = {}
@@ -444,6 +491,22 @@ def write_results(folder, raw: pd.DataFrame, config: PlantConfig | None = None) 
             atomic_write_text(stage.folder / f"{name}.csv", table.to_csv(index=False))
             atomic_write_text(stage.folder / f"{name}.md", markdown(table))
             written[name] = table
+        for source in raw["source"].unique():
+            rows = raw[raw["source"] == source]
+            plot_coverage_effort(stage.folder / "figures" / f"coverage_effort_{source}.png", rows,
+                                 f"Coverage-effort trade-off ({source} pairs)")
+        ours = written["table2_plant_complexity"]
+        for source in ours["source"].unique() if len(ours) else ():
+            plot_species_bars(stage.folder / "figures" / f"views_per_species_{source}.png",
+                              ours[ours["source"] == source], "views", f"Ours: views per species ({source} pairs)")
+        if comparison is not None:
+            from tpvp.experiments.comparison import write_comparison_files
+
+            case_config = comparison.config(config)
+            scene = _scene(replace(comparison, initial_view=0), replace(case_config, initial_view=0))
+            write_comparison_files(stage.folder / "comparison", scene, case_config,
+                                   title=f"{comparison.view_space}, {comparison.instance.name}, rotation "
+                                         f"{comparison.rotation_deg:g} deg, initial view {comparison.initial_view}")
         atomic_write_text(stage.folder / "config.yaml", config_yaml(config, "base configuration of the experiments"))
         atomic_write_text(stage.folder / "provenance.json", json.dumps(provenance(config), indent=2) + "\n")
     return written

@@ -156,30 +156,57 @@ def _observation(scene: Scene, view: int) -> np.ndarray:
     return scene.grid.centres[scene.truth_visibility[view].indices]
 
 
-def run_case(scene: Scene, config: PlantConfig = PlantConfig(), progress=None) -> CaseResult:
-    """Warm-up, transfer, plan and execute one case; ``progress(stage)`` is called per stage."""
+@dataclass(frozen=True, eq=False)
+class Transfer:
+    """What the robot knows before planning: the executed views (initial + warm-up NBVs), their
+    observations (the coarse reconstruction) and the previous session aligned onto it."""
+
+    nbv: object  # the NBV method object, holding the executed views' state
+    executed: list
+    coarse: np.ndarray  # observed points, duplicates kept (as the reference feeds registration)
+    alignment: object  # tpvp.registration.methods.Alignment
+    timings: dict  # warm_up, registration (s)
+    warnings: list
+
+
+def transfer(scene: Scene, config: PlantConfig = PlantConfig(), progress=None) -> Transfer:
+    """Initial view, warm-up NBVs and registration of the previous session onto what they saw."""
     say = progress or (lambda stage: None)
     timings = {}
     space = scene.view_space
-    centre = np.zeros(3)
     initial = space.view_index(config.initial_view)
 
     t = time.perf_counter()
     say("warm-up NBV")
-    nbv = make_nbv(NbvContext(space, centre, scene.sensor, config.nbv))
+    nbv = make_nbv(NbvContext(space, np.zeros(3), scene.sensor, config.nbv))
     nbv.integrate(initial, _observation(scene, initial))
     for _ in range(config.nbv.warm_up_views):
         choice = nbv.next_view()
         nbv.integrate(choice.view, _observation(scene, choice.view))
-    executed = list(nbv.executed)
-    coarse = np.concatenate(nbv.observations)  # duplicates kept, as the reference feeds registration
+    coarse = np.concatenate(nbv.observations)
     timings["warm_up"] = time.perf_counter() - t
 
     t = time.perf_counter()
     say("registration")
     alignment = register(scene.previous, coarse, config.registration)
     timings["registration"] = time.perf_counter() - t
-    warnings = _registration_warnings(scene, alignment, config)
+    return Transfer(nbv, list(nbv.executed), coarse, alignment, timings,
+                    _registration_warnings(scene, alignment, config))
+
+
+def run_case(scene: Scene, config: PlantConfig = PlantConfig(), progress=None,
+             transferred: Transfer | None = None) -> CaseResult:
+    """Warm-up, transfer, plan and execute one case; ``progress(stage)`` is called per stage.
+    ``transferred``: the :func:`transfer` of this scene and configuration when already computed
+    (methods that differ only after registration share it)."""
+    say = progress or (lambda stage: None)
+    space = scene.view_space
+    centre = np.zeros(3)
+    transferred = transferred or transfer(scene, config, progress)
+    nbv, executed, coarse, alignment = (transferred.nbv, transferred.executed, transferred.coarse,
+                                        transferred.alignment)
+    timings = dict(transferred.timings)
+    warnings = list(transferred.warnings)
 
     t = time.perf_counter()
     say("inflation")

@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from tpvp.nbv.information_gain import next_best_view
-from tpvp.nbv.occupancy import OccupancyMap
+from tpvp.nbv.occupancy import OccupancyMap, observed_radius
 from tpvp.registry import Registry
 
 NBV_METHODS = Registry("NBV method")
@@ -45,13 +45,24 @@ class NbvChoice:
 class GeometricNbv:
     """Information gain on an occupancy map of what was observed: unknown voxels reached by a
     view's pixel rays (every ``pixel_stride``-th pixel), free space carved along the executed
-    views' pixel rays; the paper's warm-up NBV in this library (docs/sensor.md#information-gain)."""
+    views' pixel rays; the paper's warm-up NBV in this library (docs/sensor.md#information-gain).
 
-    def __init__(self, context: NbvContext):
+    The map is sized on all observed points, so a view that sees farther from the centre than
+    every earlier one changes its geometry and the map is rebuilt from every view; otherwise
+    (``incremental``, the default) the new views are integrated into the current map, the same
+    ``integrate`` calls in the same order as a rebuild, hence the same map. ``incremental=False``
+    rebuilds after every view (the reference).
+    """
+
+    def __init__(self, context: NbvContext, incremental: bool = True):
         self.context = context
+        self.incremental = bool(incremental)
         self.executed: list[int] = []
         self.observations: list[np.ndarray] = []
+        self._radii: list[float] = []  # per view (once mapped): farthest observed point from the centre
         self._occupancy: OccupancyMap | None = None
+        self._radius = 0.0  # the radius that _occupancy is sized on
+        self._integrated = 0  # views in _occupancy
 
     @property
     def view_state(self) -> np.ndarray:
@@ -63,19 +74,31 @@ class GeometricNbv:
     def integrate(self, view: int, points: np.ndarray) -> None:
         self.executed.append(int(view))
         self.observations.append(np.asarray(points, dtype=np.float64).reshape(-1, 3))
-        self._occupancy = None
 
     @property
     def occupancy(self) -> OccupancyMap:
-        """The occupancy map of every integrated view (rebuilt after a new view: it is sized on
-        all observed points)."""
-        if self._occupancy is None:
-            space, sensor, config = self.context.view_space, self.context.sensor, self.context.config
-            self._occupancy = OccupancyMap.from_observations(
+        """The occupancy map of every integrated view (sized on all observed points)."""
+        if self._occupancy is not None and self._integrated == len(self.executed):
+            return self._occupancy
+        space, sensor, config = self.context.view_space, self.context.sensor, self.context.config
+        carving = {"stride": config.pixel_stride, "max_range": sensor.max_range,
+                   "intrinsics": sensor.intrinsics}
+        for i in range(len(self._radii), len(self.observations)):
+            self._radii.append(observed_radius(self.context.centre, self.observations[i],
+                                               f"observed points of view {i}"))
+        radius = max(self._radii, default=0.0)
+        if self.incremental and self._occupancy is not None and radius == self._radius:
+            occupancy = self._occupancy
+            for i in range(self._integrated, len(self.executed)):
+                view = self.executed[i]
+                occupancy = occupancy.integrate(space.positions[view], self.observations[i],
+                                                space.look_ats[view], **carving)
+        else:
+            occupancy = OccupancyMap.from_observations(
                 self.context.centre, space.positions[self.executed], self.observations, config.map,
-                look_ats=space.look_ats[self.executed], stride=config.pixel_stride,
-                max_range=sensor.max_range, intrinsics=sensor.intrinsics)
-        return self._occupancy
+                look_ats=space.look_ats[self.executed], **carving)
+        self._occupancy, self._radius, self._integrated = occupancy, radius, len(self.executed)
+        return occupancy
 
     def next_view(self) -> NbvChoice:
         space, sensor = self.context.view_space, self.context.sensor

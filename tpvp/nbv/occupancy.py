@@ -74,6 +74,15 @@ def _as_position(position, name: str) -> np.ndarray:
     return arr.reshape(3)
 
 
+def observed_radius(centre, points, name: str = "observed points") -> float:
+    """Largest distance from ``centre`` to an observed point (0 for none): the map is sized on
+    the largest over all views (:meth:`OccupancyMap.from_observations`)."""
+    points = _as_points(points, name)
+    if not len(points):
+        return 0.0
+    return float(np.sqrt(((points - _as_position(centre, "map centre")) ** 2).sum(axis=1)).max())
+
+
 @dataclass(frozen=True, eq=False)
 class OccupancyMap:
     """Dense unknown / free / occupied grid; immutable (``integrate`` returns a new map)."""
@@ -131,7 +140,7 @@ class OccupancyMap:
             targets = [_as_position(t, f"look-at {i}") for i, t in enumerate(arr)]
         if sum(len(c) for c in clouds) == 0:
             raise PointCloudError("no observed points: cannot size the occupancy map")
-        radius = max(np.sqrt(((c - centre) ** 2).sum(axis=1)).max() for c in clouds if len(c))
+        radius = max(observed_radius(centre, c) for c in clouds)
         if radius <= 0:
             raise PointCloudError("all observed points coincide with the map centre")
         occupancy = cls.empty(centre, config.size_factor * radius, config)

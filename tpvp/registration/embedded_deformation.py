@@ -37,6 +37,22 @@ Deviations (fixes):
   which Adam's per-coordinate normalisation turns into ~lr = 1 mm steps;
 * Adam and the exponential decay are written out (same numbers as torch.optim, checked by a test)
   because torch.optim's first use imports torch._dynamo (~1.3 s);
+* the losses and their gradient are computed by hand (numba kernel :func:`_loss_and_gradient`), not
+  by torch autograd: with ~1000-point tensors the reference spent its 10 ms per iteration on
+  per-op and autograd overhead and on scipy KD-tree queries. Same maths (Rodrigues and its
+  derivative, the displacement-form blend, ARAP, truncated Chamfer with the nearest neighbours held
+  fixed, the Laplacian with its weights held constant), same random subsets, same Adam (torch
+  ops on the shared memory of the parameters), same stop rule: the result equals the autograd
+  implementation (:func:`_optimise_autograd`, kept as the tests' oracle) up to rounding (~1e-17 m
+  on the benchmark pairs after 300 iterations). The nearest neighbours come from an exact uniform
+  grid search instead of scipy's KD-tree (:func:`_grid_knn`; among points at exactly equal
+  distance it may pick another one: the same loss value, the gradient goes to the other point).
+  A benchmark pair (~1000 nodes, 300 iterations) takes ~0.8-1.2 s instead of 3-6 s on a
+  shared 2-core machine (``benchmarks/registration_bench.py``); ~3/4 of it is the iterations, of
+  which the nearest-neighbour searches are ~60 %. The Laplacian is still evaluated every
+  iteration (~40 % of one), since it enters the recorded losses and the stop test. The kernels
+  are compiled once per machine and source version (numba cache, ~15-30 s) and loaded in ~0.4 s
+  by a process's first call (:func:`compile_kernels` does that up front);
 * float64 throughout (reference float32); inputs are checked (empty, NaN, units, overlap);
 * if every anchor weight of a point underflows (impossible at the default settings) the point
   follows its nearest node instead of becoming NaN.
@@ -54,6 +70,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import torch
+from numba import njit
 from scipy.spatial import cKDTree
 
 from tpvp.errors import ConfigError, PointCloudError, checked_cloud
@@ -74,9 +91,11 @@ class EDConfig:
     chamfer_samples: points drawn from P~ and from Q per iteration (also the Laplacian subset).
     chamfer_truncation: squared distance (m^2) from which a Chamfer term is zeroed.
     stop_loss: stop when the total loss falls below this. max_nodes: refuse larger graphs (units).
-    threads: torch CPU threads during the call (None: leave torch's setting). Default 1: the
-        tensors are ~1000 points, intra-op threads gain nothing, and on a shared 2-core machine
-        OpenMP spin-waiting made 2 threads up to 5x slower (3.3 s vs 4.5-18 s per 300 iterations).
+    threads: torch CPU threads during the call (None: leave torch's setting). Torch only runs the
+        Adam update, and that always on one thread (a second one spin-waits and slowed the numba
+        kernel between steps ~5x on a 2-core machine); the setting acts on the torch-autograd
+        reference (``_optimise_autograd``), where 2 threads were up to 5x slower too. The numba
+        kernels are serial.
     """
 
     node_coverage: float = 0.004
@@ -244,7 +263,7 @@ def _warp_numpy(points, nodes, rotations, translations, idx, w) -> np.ndarray:
 
 
 # --------------------------------------------------------------------------------------------------
-# torch pieces
+# torch pieces: axis_angle_to_matrix and the autograd reference (the oracle of tests and benchmark)
 # --------------------------------------------------------------------------------------------------
 
 
@@ -272,7 +291,7 @@ def _warp_torch(x, g_a, w, R_a, t_a):
     return x + (w[..., None] * moved).sum(1)
 
 
-def _chamfer_sq(xs, qs, truncation):
+def _chamfer_sq_torch(xs, qs, truncation):
     """Two-sided squared Chamfer of two subsets, sum of the directed means (reference loss)."""
     # The gradient flows through the distances only, not the NN choice, so the search can run in
     # numpy; two 1000-point KD-trees are several times faster than a dense cdist + argmin on CPU.
@@ -286,7 +305,7 @@ def _chamfer_sq(xs, qs, truncation):
     return a.mean() + b.mean()
 
 
-def _laplacian(x, k):
+def _laplacian_torch(x, k):
     """Membrane Laplacian of a subset: mean of W_ij |x_i - x_j|^2 over its k-NN graph."""
     k = min(k, len(x) - 1)
     if k < 1:
@@ -302,6 +321,426 @@ def _laplacian(x, k):
 
 
 # --------------------------------------------------------------------------------------------------
+# numba kernels: one optimisation iteration (losses + analytic gradient) and a grid k-NN
+# --------------------------------------------------------------------------------------------------
+
+_JIT = dict(cache=True, error_model="numpy")  # numpy semantics: 0/0 is NaN (as in torch), no raise
+
+
+@njit(**_JIT)
+def _grid_build(ref):
+    """Uniform grid over ``ref`` (n, 3) for k-NN queries: origin, cell size, cells per axis, CSR
+    cell starts and the points sorted by cell. About one cell per point of the bounding box volume
+    (a plant surface then has a few points per occupied cell)."""
+    n = ref.shape[0]
+    lo = np.empty(3)
+    ext = np.empty(3)
+    for a in range(3):
+        lo[a] = ref[0, a]
+        hi = ref[0, a]
+        for i in range(1, n):
+            v = ref[i, a]
+            if v < lo[a]:
+                lo[a] = v
+            if v > hi:
+                hi = v
+        ext[a] = hi - lo[a]
+    emax = max(ext[0], max(ext[1], ext[2]))
+    if emax > 0:
+        vol = 1.0
+        for a in range(3):
+            vol *= max(ext[a], 1e-3 * emax)  # flat clouds: keep the cells finite
+        h = (vol / n) ** (1.0 / 3.0)
+    else:
+        h = 1.0
+    dims = np.empty(3, np.int64)
+    while True:
+        for a in range(3):
+            dims[a] = int(ext[a] / h) + 1
+        if dims[0] * dims[1] * dims[2] <= 4 * n + 64:
+            break
+        h *= 1.25
+    cell = np.empty(n, np.int64)
+    start = np.zeros(dims[0] * dims[1] * dims[2] + 1, np.int64)
+    for i in range(n):
+        key = 0
+        for a in range(3):
+            c = int((ref[i, a] - lo[a]) / h)
+            c = min(max(c, 0), dims[a] - 1)
+            key = key * dims[a] + c
+        cell[i] = key
+        start[key + 1] += 1
+    for c in range(1, start.shape[0]):
+        start[c] += start[c - 1]
+    fill = start[:-1].copy()
+    order = np.empty(n, np.int64)
+    for i in range(n):
+        order[fill[cell[i]]] = i
+        fill[cell[i]] += 1
+    pts = np.empty((n, 3))
+    for j in range(n):
+        for a in range(3):
+            pts[j, a] = ref[order[j], a]
+    return lo, h, dims, start, order, pts
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _scan_cell(q, pts, order, start, cell, s, k, out_idx, out_d2):
+    """Insert the points of one grid cell into query s's sorted k best (strictly closer only)."""
+    for j in range(start[cell], start[cell + 1]):
+        dx = q[0] - pts[j, 0]
+        dy = q[1] - pts[j, 1]
+        dz = q[2] - pts[j, 2]
+        d2 = dx * dx + dy * dy + dz * dz
+        if d2 < out_d2[s, k - 1]:
+            m = k - 1
+            while m > 0 and out_d2[s, m - 1] > d2:
+                out_d2[s, m] = out_d2[s, m - 1]
+                out_idx[s, m] = out_idx[s, m - 1]
+                m -= 1
+            out_d2[s, m] = d2
+            out_idx[s, m] = order[j]
+
+
+@njit(**_JIT)
+def _grid_knn(ref, queries, k, out_idx, out_d2):
+    """The k nearest points of ``ref`` to each query, ascending squared distance: out_idx, out_d2
+    (nq, k). Exact: rings of cells around the query's cell are scanned until no unscanned cell can
+    hold a closer point (equal distances keep the first found; k <= len(ref))."""
+    lo, h, dims, start, order, pts = _grid_build(ref)
+    margin = 1e-9 * h  # rounding of the cell indices: stop only when clearly done
+    c = np.empty(3, np.int64)
+    q = np.empty(3)
+    for s in range(queries.shape[0]):
+        for j in range(k):
+            out_d2[s, j] = np.inf
+            out_idx[s, j] = -1
+        for a in range(3):
+            q[a] = queries[s, a]
+            ca = int(np.floor((q[a] - lo[a]) / h))
+            c[a] = min(max(ca, 0), dims[a] - 1)
+        r = 0
+        while True:
+            for ix in range(max(c[0] - r, 0), min(c[0] + r, dims[0] - 1) + 1):
+                edge_x = abs(ix - c[0]) == r
+                for iy in range(max(c[1] - r, 0), min(c[1] + r, dims[1] - 1) + 1):
+                    base = (ix * dims[1] + iy) * dims[2]
+                    if edge_x or abs(iy - c[1]) == r:  # a face of the ring: the whole column
+                        for iz in range(max(c[2] - r, 0), min(c[2] + r, dims[2] - 1) + 1):
+                            _scan_cell(q, pts, order, start, base + iz, s, k, out_idx, out_d2)
+                    else:  # inside the ring's shadow: only the column's two end cells are new
+                        if c[2] - r >= 0:
+                            _scan_cell(q, pts, order, start, base + c[2] - r, s, k, out_idx, out_d2)
+                        if c[2] + r < dims[2]:
+                            _scan_cell(q, pts, order, start, base + c[2] + r, s, k, out_idx, out_d2)
+            # every unscanned cell lies beyond a face of the scanned block: bound its distance
+            lb = np.inf
+            for a in range(3):
+                if c[a] - r > 0:
+                    lb = min(lb, q[a] - (lo[a] + (c[a] - r) * h))
+                if c[a] + r + 1 < dims[a]:
+                    lb = min(lb, lo[a] + (c[a] + r + 1) * h - q[a])
+            if lb == np.inf:
+                break  # the whole grid was scanned
+            lb = max(lb - margin, 0.0)
+            if out_d2[s, k - 1] <= lb * lb:
+                break
+            r += 1
+
+
+@njit(**_JIT)
+def _rodrigues(phi, R, da, db):
+    """R = I + a [phi]x + b [phi]x^2 (as :func:`axis_angle_to_matrix`) and a', b' = d(a, b)/d theta^2."""
+    for m in range(phi.shape[0]):
+        x, y, z = phi[m, 0], phi[m, 1], phi[m, 2]
+        theta2 = x * x + y * y + z * z
+        if theta2 < 1e-8:
+            a = 1.0 - theta2 / 6.0 + theta2**2 / 120.0
+            b = 0.5 - theta2 / 24.0 + theta2**2 / 720.0
+            da[m] = -1.0 / 6.0 + 2.0 * theta2 / 120.0
+            db[m] = -1.0 / 24.0 + 2.0 * theta2 / 720.0
+        else:
+            th = np.sqrt(theta2)
+            s, c = np.sin(th), np.cos(th)
+            a = s / th
+            b = (1.0 - c) / th**2
+            da[m] = (c / th - s / th**2) / (2.0 * th)
+            db[m] = (s / th**2 - 2.0 * (1.0 - c) / th**3) / (2.0 * th)
+        # K = [[0, -z, y], [z, 0, -x], [-y, x, 0]]; K @ K = phi phi^T - theta2 I
+        R[m, 0, 0] = 1.0 + b * (-(y * y) - z * z)
+        R[m, 0, 1] = a * -z + b * (x * y)
+        R[m, 0, 2] = a * y + b * (x * z)
+        R[m, 1, 0] = a * z + b * (x * y)
+        R[m, 1, 1] = 1.0 + b * (-(x * x) - z * z)
+        R[m, 1, 2] = a * -x + b * (y * z)
+        R[m, 2, 0] = a * -y + b * (x * z)
+        R[m, 2, 1] = a * x + b * (y * z)
+        R[m, 2, 2] = 1.0 + b * (-(x * x) - y * y)
+
+
+@njit(**_JIT)
+def _rodrigues_backward(phi, gR, da, db, g_phi):
+    """dL/dphi from dL/dR: R = I + a K + b K^2 with a, b functions of theta2 = |phi|^2.
+
+    dL/dphi_m = 2 phi_m (a' <G, K> + b' <G, K^2>) + a <G, E_m> + b <G, E_m K + K E_m>, E_m = dK/dphi_m;
+    <H, E_m> = (H21 - H12, H02 - H20, H10 - H01) and <G, E_m K + K E_m> = <-(G K + K G), E_m>.
+    """
+    K = np.empty((3, 3))
+    for m in range(phi.shape[0]):
+        x, y, z = phi[m, 0], phi[m, 1], phi[m, 2]
+        theta2 = x * x + y * y + z * z
+        if theta2 < 1e-8:
+            a = 1.0 - theta2 / 6.0 + theta2**2 / 120.0
+            b = 0.5 - theta2 / 24.0 + theta2**2 / 720.0
+        else:
+            th = np.sqrt(theta2)
+            a = np.sin(th) / th
+            b = (1.0 - np.cos(th)) / th**2
+        K[0, 0], K[0, 1], K[0, 2] = 0.0, -z, y
+        K[1, 0], K[1, 1], K[1, 2] = z, 0.0, -x
+        K[2, 0], K[2, 1], K[2, 2] = -y, x, 0.0
+        G = gR[m]
+        gk = 0.0  # <G, K>
+        gk2 = 0.0  # <G, K^2>
+        for i in range(3):
+            for j in range(3):
+                gk += G[i, j] * K[i, j]
+                kk = K[i, 0] * K[0, j] + K[i, 1] * K[1, j] + K[i, 2] * K[2, j]
+                gk2 += G[i, j] * kk
+        # H = -(G K + K G), only its antisymmetric part is needed
+        h21 = -(G[2, 0] * K[0, 1] + G[2, 1] * K[1, 1] + G[2, 2] * K[2, 1]
+                + K[2, 0] * G[0, 1] + K[2, 1] * G[1, 1] + K[2, 2] * G[2, 1])
+        h12 = -(G[1, 0] * K[0, 2] + G[1, 1] * K[1, 2] + G[1, 2] * K[2, 2]
+                + K[1, 0] * G[0, 2] + K[1, 1] * G[1, 2] + K[1, 2] * G[2, 2])
+        h02 = -(G[0, 0] * K[0, 2] + G[0, 1] * K[1, 2] + G[0, 2] * K[2, 2]
+                + K[0, 0] * G[0, 2] + K[0, 1] * G[1, 2] + K[0, 2] * G[2, 2])
+        h20 = -(G[2, 0] * K[0, 0] + G[2, 1] * K[1, 0] + G[2, 2] * K[2, 0]
+                + K[2, 0] * G[0, 0] + K[2, 1] * G[1, 0] + K[2, 2] * G[2, 0])
+        h10 = -(G[1, 0] * K[0, 0] + G[1, 1] * K[1, 0] + G[1, 2] * K[2, 0]
+                + K[1, 0] * G[0, 0] + K[1, 1] * G[1, 0] + K[1, 2] * G[2, 0])
+        h01 = -(G[0, 0] * K[0, 1] + G[0, 1] * K[1, 1] + G[0, 2] * K[2, 1]
+                + K[0, 0] * G[0, 1] + K[0, 1] * G[1, 1] + K[0, 2] * G[2, 1])
+        common = 2.0 * (da[m] * gk + db[m] * gk2)
+        g_phi[m, 0] = common * x + a * (G[2, 1] - G[1, 2]) + b * (h21 - h12)
+        g_phi[m, 1] = common * y + a * (G[0, 2] - G[2, 0]) + b * (h02 - h20)
+        g_phi[m, 2] = common * z + a * (G[1, 0] - G[0, 1]) + b * (h10 - h01)
+
+
+@njit(**_JIT)
+def _warp_subset(P, sel, a_idx, a_w, nodes, R, t, out):
+    """out = the ED blend of P[sel] in displacement form (as :func:`_warp_numpy`)."""
+    for s in range(sel.shape[0]):
+        p = sel[s]
+        acc0 = 0.0
+        acc1 = 0.0
+        acc2 = 0.0
+        for kk in range(a_idx.shape[1]):
+            n = a_idx[p, kk]
+            w = a_w[p, kk]
+            l0 = P[p, 0] - nodes[n, 0]
+            l1 = P[p, 1] - nodes[n, 1]
+            l2 = P[p, 2] - nodes[n, 2]
+            acc0 += w * (R[n, 0, 0] * l0 + R[n, 0, 1] * l1 + R[n, 0, 2] * l2 - l0 + t[n, 0])
+            acc1 += w * (R[n, 1, 0] * l0 + R[n, 1, 1] * l1 + R[n, 1, 2] * l2 - l1 + t[n, 1])
+            acc2 += w * (R[n, 2, 0] * l0 + R[n, 2, 1] * l1 + R[n, 2, 2] * l2 - l2 + t[n, 2])
+        out[s, 0] = P[p, 0] + acc0
+        out[s, 1] = P[p, 1] + acc1
+        out[s, 2] = P[p, 2] + acc2
+
+
+@njit(**_JIT)
+def _warp_backward(dX, P, sel, a_idx, a_w, nodes, gR, g_t):
+    """Add the parameter gradient of sum_s <dX_s, warp(P[sel_s])>: dR_a += w dX l^T, dt_a += w dX."""
+    for s in range(sel.shape[0]):
+        p = sel[s]
+        for kk in range(a_idx.shape[1]):
+            n = a_idx[p, kk]
+            w = a_w[p, kk]
+            l0 = P[p, 0] - nodes[n, 0]
+            l1 = P[p, 1] - nodes[n, 1]
+            l2 = P[p, 2] - nodes[n, 2]
+            for i in range(3):
+                gi = w * dX[s, i]
+                gR[n, i, 0] += gi * l0
+                gR[n, i, 1] += gi * l1
+                gR[n, i, 2] += gi * l2
+                g_t[n, i] += gi
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _add_arc_gradient(gR, g_t, m, j, i, gi, g0, g1, g2):
+    gR[m, i, 0] += gi * g0
+    gR[m, i, 1] += gi * g1
+    gR[m, i, 2] += gi * g2
+    g_t[m, i] += gi
+    g_t[j, i] -= gi
+
+
+@njit(**_JIT)
+def _arap(R, t, g_ij, e_idx, e_w, scale, gR, g_t):
+    """ARAP loss mean over arcs of w_ij |R_i g_ij - g_ij + t_i - t_j|^2; adds scale * its gradient."""
+    M, k = e_idx.shape
+    if k == 0:
+        return 0.0
+    inv = 1.0 / (M * k)
+    total = 0.0
+    for m in range(M):
+        for kk in range(k):
+            j = e_idx[m, kk]
+            w = e_w[m, kk]
+            g0, g1, g2 = g_ij[m, kk, 0], g_ij[m, kk, 1], g_ij[m, kk, 2]
+            r0 = R[m, 0, 0] * g0 + R[m, 0, 1] * g1 + R[m, 0, 2] * g2 - g0 + t[m, 0] - t[j, 0]
+            r1 = R[m, 1, 0] * g0 + R[m, 1, 1] * g1 + R[m, 1, 2] * g2 - g1 + t[m, 1] - t[j, 1]
+            r2 = R[m, 2, 0] * g0 + R[m, 2, 1] * g1 + R[m, 2, 2] * g2 - g2 + t[m, 2] - t[j, 2]
+            total += w * (r0 * r0 + r1 * r1 + r2 * r2)
+            c = 2.0 * scale * w * inv
+            _add_arc_gradient(gR, g_t, m, j, 0, c * r0, g0, g1, g2)
+            _add_arc_gradient(gR, g_t, m, j, 1, c * r1, g0, g1, g2)
+            _add_arc_gradient(gR, g_t, m, j, 2, c * r2, g0, g1, g2)
+    return total * inv
+
+
+@njit(**_JIT)
+def _chamfer(X, Qs, truncation, dX):
+    """Two-sided truncated squared Chamfer of two subsets (sum of the directed means) and its
+    gradient with respect to X (the NN choice held fixed, as autograd does)."""
+    n, nq = X.shape[0], Qs.shape[0]
+    idx = np.empty((n, 1), np.int64)
+    d2 = np.empty((n, 1))
+    _grid_knn(Qs, X, 1, idx, d2)
+    idx_q = np.empty((nq, 1), np.int64)
+    d2_q = np.empty((nq, 1))
+    _grid_knn(X, Qs, 1, idx_q, d2_q)
+    dX[:] = 0.0
+    sa = 0.0
+    for s in range(n):
+        j = idx[s, 0]
+        e0, e1, e2 = X[s, 0] - Qs[j, 0], X[s, 1] - Qs[j, 1], X[s, 2] - Qs[j, 2]
+        a = e0 * e0 + e1 * e1 + e2 * e2
+        if a < truncation:
+            sa += a
+            c = 2.0 / n
+            dX[s, 0] += c * e0
+            dX[s, 1] += c * e1
+            dX[s, 2] += c * e2
+    sb = 0.0
+    for s in range(nq):
+        j = idx_q[s, 0]
+        e0, e1, e2 = X[j, 0] - Qs[s, 0], X[j, 1] - Qs[s, 1], X[j, 2] - Qs[s, 2]
+        b = e0 * e0 + e1 * e1 + e2 * e2
+        if b < truncation:
+            sb += b
+            c = 2.0 / nq
+            dX[j, 0] += c * e0
+            dX[j, 1] += c * e1
+            dX[j, 2] += c * e2
+    return sa / n + sb / nq
+
+
+@njit(**_JIT)
+def _kth_smallest(values, kth):
+    """The kth smallest value (0-based) of a 1-D array, by quickselect on a copy."""
+    a = values.copy()
+    lo, hi = 0, a.shape[0] - 1
+    while lo < hi:
+        pivot = a[(lo + hi) // 2]
+        i, j = lo, hi
+        while i <= j:
+            while a[i] < pivot:
+                i += 1
+            while a[j] > pivot:
+                j -= 1
+            if i <= j:
+                a[i], a[j] = a[j], a[i]
+                i += 1
+                j -= 1
+        if kth <= j:
+            hi = j
+        elif kth >= i:
+            lo = i
+        else:
+            break
+    return a[kth]
+
+
+@njit(**_JIT)
+def _laplacian(X, k, dX):
+    """Membrane Laplacian of a subset (mean of W_ij |x_i - x_j|^2 over its k-NN graph, W held
+    constant) and, in dX, its gradient."""
+    n = X.shape[0]
+    dX[:] = 0.0
+    k = min(k, n - 1)
+    if k < 1:
+        return 0.0
+    idx = np.empty((n, k + 1), np.int64)
+    d2 = np.empty((n, k + 1))
+    _grid_knn(X, X, k + 1, idx, d2)
+    # drop column 0, the closest (the point itself, or one copy of a duplicate: the same values)
+    d = np.empty(n * k)
+    for i in range(n):
+        for kk in range(k):
+            d[i * k + kk] = np.sqrt(d2[i, kk + 1])  # the distance cKDTree reports
+    sigma = max(_kth_smallest(d, (n * k - 1) // 2), 1e-12)  # torch.median: the lower median
+    two_s2 = 2 * sigma**2
+    W = np.empty(k)
+    total = 0.0
+    c = 2.0 / (n * k)
+    for i in range(n):
+        wsum = 0.0
+        for kk in range(k):
+            W[kk] = np.exp(-(d[i * k + kk] ** 2) / two_s2)
+            wsum += W[kk]
+        for kk in range(k):
+            j = idx[i, kk + 1]
+            w = W[kk] / wsum
+            e0, e1, e2 = X[i, 0] - X[j, 0], X[i, 1] - X[j, 1], X[i, 2] - X[j, 2]
+            total += w * (e0 * e0 + e1 * e1 + e2 * e2)
+            g0, g1, g2 = c * w * e0, c * w * e1, c * w * e2
+            dX[i, 0] += g0
+            dX[i, 1] += g1
+            dX[i, 2] += g2
+            dX[j, 0] -= g0
+            dX[j, 1] -= g1
+            dX[j, 2] -= g2
+    return total / (n * k)
+
+
+@njit(**_JIT)
+def _loss_and_gradient(phi, t, P, Q, nodes, a_idx, a_w, e_idx, e_w, g_ij, sel_p, sel_q, sel_l,
+                       w_arap, w_chamfer, w_laplacian, laplacian_in_gradient, laplacian_k, truncation,
+                       g_phi, g_t):
+    """One iteration: the unweighted (ARAP, Chamfer, Laplacian) losses at (phi, t), and the gradient
+    of the weighted total (the Laplacian only if ``laplacian_in_gradient``) in g_phi, g_t."""
+    M = phi.shape[0]
+    R = np.empty((M, 3, 3))
+    da = np.empty(M)
+    db = np.empty(M)
+    _rodrigues(phi, R, da, db)
+    gR = np.zeros((M, 3, 3))
+    g_t[:] = 0.0
+    l_arap = _arap(R, t, g_ij, e_idx, e_w, w_arap, gR, g_t)
+    X = np.empty((sel_p.shape[0], 3))
+    _warp_subset(P, sel_p, a_idx, a_w, nodes, R, t, X)
+    Qs = np.empty((sel_q.shape[0], 3))
+    for s in range(sel_q.shape[0]):
+        for a in range(3):
+            Qs[s, a] = Q[sel_q[s], a]
+    dX = np.empty_like(X)
+    l_cd = _chamfer(X, Qs, truncation, dX)
+    dX *= w_chamfer
+    _warp_backward(dX, P, sel_p, a_idx, a_w, nodes, gR, g_t)
+    Xl = np.empty((sel_l.shape[0], 3))
+    _warp_subset(P, sel_l, a_idx, a_w, nodes, R, t, Xl)
+    dXl = np.empty_like(Xl)
+    l_lap = _laplacian(Xl, laplacian_k, dXl)
+    if laplacian_in_gradient:
+        dXl *= w_laplacian
+        _warp_backward(dXl, P, sel_l, a_idx, a_w, nodes, gR, g_t)
+    _rodrigues_backward(phi, gR, da, db, g_phi)
+    return l_arap, l_cd, l_lap
+
+
+# --------------------------------------------------------------------------------------------------
 # main entry point
 # --------------------------------------------------------------------------------------------------
 
@@ -312,6 +751,13 @@ def register_embedded_deformation(P, Q, config: EDConfig | None = None) -> Regis
     Both clouds must already share a frame (no rigid pre-alignment is done). Returns the warp of
     the final parameters (the reference returns the one of the start of its last iteration).
     """
+    return _register(P, Q, config, _optimise)
+
+
+def _register(P, Q, config, optimise) -> RegistrationResult:
+    """:func:`register_embedded_deformation` with the optimiser as an argument: :func:`_optimise`
+    (analytic gradients, numba) or :func:`_optimise_autograd` (the torch-autograd reference that
+    tests and ``benchmarks/registration_bench.py`` compare it with)."""
     config = EDConfig() if config is None else config
     if not isinstance(config, EDConfig):
         raise ConfigError(f"config must be an EDConfig, got {type(config).__name__}")
@@ -330,7 +776,7 @@ def register_embedded_deformation(P, Q, config: EDConfig | None = None) -> Regis
                 f"(limit max_nodes={config.max_nodes}); is P in metres?")
         edge_idx, edge_w = _edges(nodes, config.k_edges)
         anchor_idx, anchor_w = _anchors(nodes, P, config)
-        R, t, losses, terms = _optimise(P, Q, nodes, edge_idx, edge_w, anchor_idx, anchor_w, config)
+        R, t, losses, terms = optimise(P, Q, nodes, edge_idx, edge_w, anchor_idx, anchor_w, config)
         warped = _warp_numpy(P, nodes, R, t, anchor_idx, anchor_w)
         seconds = time.perf_counter() - start
     finally:
@@ -364,25 +810,23 @@ class _Adam:
             p.addcdiv_(m, denom, value=-self.lr / bias1)
 
 
-def _optimise(P, Q, nodes, edge_idx, edge_w, anchor_idx, anchor_w, config: EDConfig):
+def _torch_losses(P, Q, nodes, edge_idx, edge_w, anchor_idx, anchor_w, config: EDConfig):
+    """The reference losses in torch: returns ``losses(phi, t, sel_p, sel_q, sel_l) -> (total,
+    l_arap, l_cd, l_lap)`` (tensors; autograd gives the gradient). Used by
+    :func:`_optimise_autograd` and by the tests of the analytic gradient."""
     dt = torch.float64
-    rng = np.random.default_rng(config.seed)
     g = torch.as_tensor(nodes, dtype=dt)
     Pt, Qt = torch.as_tensor(P, dtype=dt), torch.as_tensor(Q, dtype=dt)
     a_idx, a_w = torch.as_tensor(anchor_idx), torch.as_tensor(anchor_w, dtype=dt)
     e_idx, e_w = torch.as_tensor(edge_idx), torch.as_tensor(edge_w, dtype=dt)
-    phi = torch.zeros((len(nodes), 3), dtype=dt, requires_grad=True)
-    t = torch.zeros((len(nodes), 3), dtype=dt, requires_grad=True)
-    adam = _Adam((phi, t), config.lr)
-    n_p, n_q = min(config.chamfer_samples, len(P)), min(config.chamfer_samples, len(Q))
     g_ij = g[e_idx] - g[:, None, :]  # (M, k, 3) undeformed edge vectors
-    losses, terms = [], []
 
-    def warp_subset(R, sel):
-        ai = a_idx[sel]
-        return _warp_torch(Pt[sel], g[ai], a_w[sel], R[ai], t[ai])
+    def losses(phi, t, sel_p, sel_q, sel_l):
+        def warp_subset(R, sel):
+            ai = a_idx[sel]
+            return _warp_torch(Pt[sel], g[ai], a_w[sel], R[ai], t[ai])
 
-    for _ in range(config.iterations):
+        sel_p, sel_q, sel_l = (torch.as_tensor(s) for s in (sel_p, sel_q, sel_l))
         R = axis_angle_to_matrix(phi)
         if e_idx.shape[1]:
             # |R_i(g_j-g_i) + g_i + t_i - (g_j + t_j)| written so that it is exactly 0 at identity
@@ -390,17 +834,34 @@ def _optimise(P, Q, nodes, edge_idx, edge_w, anchor_idx, anchor_w, config: EDCon
             l_arap = (e_w * (res**2).sum(-1)).mean()
         else:
             l_arap = t.sum() * 0.0
-        # fresh subsets each iteration (reference: torch.randperm, non-deterministic)
-        sel_p = torch.as_tensor(rng.choice(len(P), n_p, replace=False))
-        sel_q = torch.as_tensor(rng.choice(len(Q), n_q, replace=False))
-        l_cd = _chamfer_sq(warp_subset(R, sel_p), Qt[sel_q], config.chamfer_truncation)
-        sel_l = torch.as_tensor(rng.choice(len(P), n_p, replace=False))
+        l_cd = _chamfer_sq_torch(warp_subset(R, sel_p), Qt[sel_q], config.chamfer_truncation)
         if config.laplacian_in_gradient:
-            l_lap = _laplacian(warp_subset(R, sel_l), config.laplacian_k)
+            l_lap = _laplacian_torch(warp_subset(R, sel_l), config.laplacian_k)
         else:  # reference quirk: @torch.no_grad(), the term only shifts the loss value
             with torch.no_grad():
-                l_lap = _laplacian(warp_subset(R, sel_l), config.laplacian_k)
+                l_lap = _laplacian_torch(warp_subset(R, sel_l), config.laplacian_k)
         total = config.w_arap * l_arap + config.w_chamfer * l_cd + config.w_laplacian * l_lap
+        return total, l_arap, l_cd, l_lap
+
+    return losses
+
+
+def _optimise_autograd(P, Q, nodes, edge_idx, edge_w, anchor_idx, anchor_w, config: EDConfig):
+    """The reference optimisation: losses in torch, gradient by autograd (the implementation before
+    the analytic gradient; 3-6 s per pair). Kept as the oracle of the tests and the benchmark."""
+    rng = np.random.default_rng(config.seed)
+    losses_of = _torch_losses(P, Q, nodes, edge_idx, edge_w, anchor_idx, anchor_w, config)
+    phi = torch.zeros((len(nodes), 3), dtype=torch.float64, requires_grad=True)
+    t = torch.zeros((len(nodes), 3), dtype=torch.float64, requires_grad=True)
+    adam = _Adam((phi, t), config.lr)
+    n_p, n_q = min(config.chamfer_samples, len(P)), min(config.chamfer_samples, len(Q))
+    losses, terms = [], []
+    for _ in range(config.iterations):
+        # fresh subsets each iteration (reference: torch.randperm, non-deterministic)
+        sel_p = rng.choice(len(P), n_p, replace=False)
+        sel_q = rng.choice(len(Q), n_q, replace=False)
+        sel_l = rng.choice(len(P), n_p, replace=False)
+        total, l_arap, l_cd, l_lap = losses_of(phi, t, sel_p, sel_q, sel_l)
         losses.append(total.item())
         terms.append((l_arap.item(), l_cd.item(), l_lap.item()))
         if losses[-1] < config.stop_loss:
@@ -412,3 +873,65 @@ def _optimise(P, Q, nodes, edge_idx, edge_w, anchor_idx, anchor_w, config: EDCon
         R = axis_angle_to_matrix(phi).numpy().copy()
         t_out = t.detach().numpy().copy()
     return R, t_out, np.asarray(losses), np.asarray(terms, dtype=np.float64).reshape(-1, 3)
+
+
+def _optimise(P, Q, nodes, edge_idx, edge_w, anchor_idx, anchor_w, config: EDConfig):
+    """The optimisation loop of :func:`_optimise_autograd` with the losses and their gradient from
+    the numba kernel :func:`_loss_and_gradient` (same random subsets, same Adam, same stop rule)."""
+    rng = np.random.default_rng(config.seed)
+    M = len(nodes)
+    # one array type for every call (C-contiguous, writeable): other layouts would compile anew
+    P, Q, nodes, a_w, e_w = (_c_array(x, np.float64) for x in (P, Q, nodes, anchor_w, edge_w))
+    a_idx, e_idx = _c_array(anchor_idx, np.int64), _c_array(edge_idx, np.int64)
+    g_ij = nodes[e_idx] - nodes[:, None, :]  # (M, k, 3) undeformed edge vectors
+    phi, t = np.zeros((M, 3)), np.zeros((M, 3))
+    g_phi, g_t = np.zeros((M, 3)), np.zeros((M, 3))
+    # Adam (torch ops, identical to torch.optim) updates phi and t in place through shared memory
+    adam = _Adam((torch.from_numpy(phi), torch.from_numpy(t)), config.lr)
+    grads = (torch.from_numpy(g_phi), torch.from_numpy(g_t))
+    n_p, n_q = min(config.chamfer_samples, len(P)), min(config.chamfer_samples, len(Q))
+    weights = (float(config.w_arap), float(config.w_chamfer), float(config.w_laplacian))
+    losses, terms = [], []
+    # Adam's torch ops on one thread whatever config.threads says: with two, torch's OpenMP workers
+    # spin after each step and slow the numba kernel between the steps ~5x on a 2-core machine.
+    old_threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        for _ in range(config.iterations):
+            # fresh subsets each iteration, drawn exactly as in _optimise_autograd
+            sel_p = rng.choice(len(P), n_p, replace=False)
+            sel_q = rng.choice(len(Q), n_q, replace=False)
+            sel_l = rng.choice(len(P), n_p, replace=False)
+            l_arap, l_cd, l_lap = _loss_and_gradient(
+                phi, t, P, Q, nodes, a_idx, a_w, e_idx, e_w, g_ij, sel_p, sel_q, sel_l, *weights,
+                bool(config.laplacian_in_gradient), int(config.laplacian_k), float(config.chamfer_truncation),
+                g_phi, g_t)
+            total = config.w_arap * l_arap + config.w_chamfer * l_cd + config.w_laplacian * l_lap
+            losses.append(total)
+            terms.append((l_arap, l_cd, l_lap))
+            if total < config.stop_loss:
+                break
+            adam.step(grads)
+            adam.lr *= config.lr_decay  # ExponentialLR, stepped every iteration
+    finally:
+        torch.set_num_threads(old_threads)
+    R = np.empty((M, 3, 3))
+    _rodrigues(phi, R, np.empty(M), np.empty(M))
+    return R, t, np.asarray(losses, dtype=np.float64), np.asarray(terms, dtype=np.float64).reshape(-1, 3)
+
+
+def _c_array(x, dtype):
+    return np.require(x, dtype=dtype, requirements=("C", "W"))
+
+
+def compile_kernels() -> float:
+    """Compile the numba kernels (or load them from numba's on-disk cache) with a 2-iteration
+    registration of a tiny pair, through the same code path and argument types as real calls;
+    returns the seconds. A run timed after it measures the registration, not the compilation
+    (first run on a machine: ~15-30 s; cache load: ~0.4 s)."""
+    start = time.perf_counter()
+    rng = np.random.default_rng(0)
+    P = rng.uniform(0.0, 0.02, size=(60, 3))
+    register_embedded_deformation(P, P + 0.0005, EDConfig(iterations=2, laplacian_in_gradient=True))
+    register_embedded_deformation(P, P + 0.0005, EDConfig(iterations=2))
+    return time.perf_counter() - start

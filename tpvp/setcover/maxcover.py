@@ -37,7 +37,7 @@ from scipy import sparse
 
 from tpvp.errors import ConfigError
 from tpvp.setcover.ilp import SetCoverConfig, _as_view_indices, _as_visibility
-from tpvp.solvers import milp_solver, solve_with_cbc_log
+from tpvp.solvers import solve_pulp_milp
 
 # Voxels per chunk when bit-packing view sets (bounds the dense (chunk, views) block).
 _PACK_CHUNK = 200_000
@@ -104,6 +104,45 @@ def _classes(columns: sparse.csc_matrix, weights: np.ndarray):
     return sparse.csr_matrix(members), class_weights
 
 
+@dataclass(frozen=True, eq=False)
+class ReducedCoverage:
+    """A coverage instance after the exact reductions: what the executed views cover, and the
+    remaining coverable voxels merged into weighted classes over the useful allowed views."""
+
+    visibility: sparse.csr_matrix  # the input (views, voxels)
+    weights: np.ndarray  # per voxel
+    integral: bool  # all weights integers
+    covered: np.ndarray  # (voxels,) seen by an executed view
+    seen: np.ndarray  # (voxels,) seen by an allowed view
+    base: float  # weight covered by the executed views
+    members: sparse.csr_matrix  # (classes, useful views) bool
+    class_weights: np.ndarray
+    columns: np.ndarray  # view index of each useful view (column of members)
+
+
+def reduce_coverage(visibility, executed=(), weights=None) -> ReducedCoverage:
+    """Apply the reductions shared by max coverage and partial set cover (module docstring)."""
+    a = _as_visibility(visibility)
+    n_views, n_voxels = a.shape
+    w, integral = _as_weights(weights, n_voxels)
+    executed = _as_view_indices(executed, n_views, "executed")
+    allowed = np.ones(n_views, dtype=bool)
+    allowed[executed] = False
+    covered = np.zeros(n_voxels, dtype=bool)
+    covered[a[executed].indices] = True
+    allowed_ids = np.flatnonzero(allowed)
+    a_allowed = a[allowed_ids]
+    seen = np.zeros(n_voxels, dtype=bool)
+    seen[a_allowed.indices] = True
+    remaining = seen & ~covered
+    members, class_weights = _classes(sparse.csc_matrix(a_allowed[:, remaining]), w[remaining])
+    useful = np.flatnonzero(np.diff(sparse.csc_matrix(members).indptr) > 0)
+    members = sparse.csr_matrix(members[:, useful])
+    members.sort_indices()
+    return ReducedCoverage(a, w, integral, covered, seen, float(w[covered].sum()), members, class_weights,
+                           allowed_ids[useful])
+
+
 def _greedy(members: sparse.csr_matrix, weights: np.ndarray, k: int) -> np.ndarray:
     """Greedy max coverage (largest new weight first, lowest index on ties), k steps at most."""
     by_view = sparse.csr_matrix(members.T)
@@ -143,49 +182,35 @@ def _prune(members: sparse.csr_matrix, weights: np.ndarray, chosen: np.ndarray) 
     return chosen[keep]
 
 
-def _solve(members: sparse.csr_matrix, weights: np.ndarray, k: int, integral: bool, config: SetCoverConfig):
-    """Solve the reduced ILP with PuLP. Returns (chosen columns or None, optimal, upper bound or
-    None, status)."""
+def coverage_model(members: sparse.csr_matrix, weights: np.ndarray, sense: str):
+    """A PuLP model over the reduced classes: binary ``x`` per view, ``0 <= y_c <= 1`` per class with
+    ``y_c <= sum_{v sees c} x_v``; returns ``(problem, x, covered weight expression)`` for the
+    caller to add its objective and budget (``sense``: "max" or "min")."""
     import pulp
 
     n_classes, n_views = members.shape
-    prob = pulp.LpProblem("max_coverage", pulp.LpMaximize)
+    prob = pulp.LpProblem("coverage", pulp.LpMaximize if sense == "max" else pulp.LpMinimize)
     x = [prob.add_variable(f"x{j}", 0, 1, cat=pulp.LpBinary) for j in range(n_views)]
     y = [prob.add_variable(f"y{c}", 0, 1) for c in range(n_classes)]
-    prob += pulp.LpAffineExpression(list(zip(y, weights.tolist())))
-    prob.addConstraint(pulp.LpConstraint(pulp.LpAffineExpression([(v, 1) for v in x]), pulp.LpConstraintLE,
-                                         "budget", k))
     indptr, indices = members.indptr, members.indices
     # One constraint per merged class (the solver's model is built row by row).
     for c in range(n_classes):
         terms = [(y[c], 1)] + [(x[j], -1) for j in indices[indptr[c]:indptr[c + 1]]]
         prob.addConstraint(pulp.LpConstraint(pulp.LpAffineExpression(terms), pulp.LpConstraintLE, f"c{c}", 0))
-    # With integral weights the objective is an integer: a gap below 1 proves the incumbent optimal.
-    gap_abs = 0.999 if integral else 0.0
-    if config.solver == "cbc":
-        log = solve_with_cbc_log(prob, config.time_limit, config.threads, gapRel=0.0, gapAbs=gap_abs)
-        status = log.get("result", pulp.LpStatus[prob.status])
-        optimal = prob.sol_status == pulp.LpSolutionOptimal and status.startswith("Optimal")
-        # With -max CBC prints "Upper bound" in the maximised sense; a "Lower bound" line would be
-        # that of the negated (minimised) objective.
-        bound = log.get("upper_bound", -log["lower_bound"] if "lower_bound" in log else None)
-    else:
-        solver = milp_solver("highs", config.time_limit, config.threads, gapRel=0.0, gapAbs=gap_abs,
-                             random_seed=0)
-        prob.solve(solver)
-        highs = prob.solverModel
-        import highspy
+    return prob, x, pulp.LpAffineExpression(list(zip(y, weights.tolist())))
 
-        model_status = highs.getModelStatus()
-        status = highs.modelStatusToString(model_status)
-        optimal = model_status == highspy.HighsModelStatus.kOptimal
-        dual = float(highs.getInfo().mip_dual_bound)
-        # PuLP hands HiGHS the negated objective of a maximisation.
-        bound = -dual if np.isfinite(dual) else None
-    has_solution = prob.sol_status in (pulp.LpSolutionOptimal, pulp.LpSolutionIntegerFeasible)
-    values = np.array([v.value() if v.value() is not None else 0.0 for v in x])
-    chosen = np.flatnonzero(values > 0.5) if has_solution else None
-    return chosen, bool(optimal), bound, str(status)
+
+def _solve(members: sparse.csr_matrix, weights: np.ndarray, k: int, integral: bool, config: SetCoverConfig):
+    """Solve the reduced ILP with PuLP. Returns (chosen columns or None, optimal, upper bound or
+    None, status)."""
+    import pulp
+
+    prob, x, covered = coverage_model(members, weights, "max")
+    prob += covered
+    prob.addConstraint(pulp.LpConstraint(pulp.LpAffineExpression([(v, 1) for v in x]), pulp.LpConstraintLE,
+                                         "budget", k))
+    # With integral weights the objective is an integer: a gap below 1 proves the incumbent optimal.
+    return solve_pulp_milp(prob, x, config.solver, config.time_limit, config.threads, 0.999 if integral else 0.0)
 
 
 def max_coverage(visibility, k, executed=(), config: SetCoverConfig = SetCoverConfig(),
@@ -203,34 +228,17 @@ def max_coverage(visibility, k, executed=(), config: SetCoverConfig = SetCoverCo
         raise ConfigError(f"config must be a SetCoverConfig, got {type(config).__name__}")
     k = _check_k(k)
     t0 = time.perf_counter()
-    a = _as_visibility(visibility)
-    n_views, n_voxels = a.shape
-    w, integral = _as_weights(weights, n_voxels)
-    executed = _as_view_indices(executed, n_views, "executed")
-    allowed = np.ones(n_views, dtype=bool)
-    allowed[executed] = False
-
-    covered = np.zeros(n_voxels, dtype=bool)
-    covered[a[executed].indices] = True
-    allowed_ids = np.flatnonzero(allowed)
-    a_allowed = a[allowed_ids]
-    seen = np.zeros(n_voxels, dtype=bool)
-    seen[a_allowed.indices] = True
-    remaining = seen & ~covered
-    base = float(w[covered].sum())
-
-    members, class_weights = _classes(sparse.csc_matrix(a_allowed[:, remaining]), w[remaining])
-    useful = np.flatnonzero(np.diff(sparse.csc_matrix(members).indptr) > 0)
-    members = sparse.csr_matrix(members[:, useful])
-    members.sort_indices()
-    cols = allowed_ids[useful]
+    reduced = reduce_coverage(visibility, executed, weights)
+    a, w, integral, covered, seen = reduced.visibility, reduced.weights, reduced.integral, reduced.covered, reduced.seen
+    members, class_weights, cols, base = reduced.members, reduced.class_weights, reduced.columns, reduced.base
+    n_voxels, n_useful = a.shape[1], members.shape[1]
     total = float(class_weights.sum())
 
     common = {"k": k, "n_voxels": int(n_voxels), "n_already_covered": int(covered.sum()),
               "n_unreachable": int((~covered & ~seen).sum()), "n_classes": int(members.shape[0])}
-    if useful.size <= k:
-        chosen, optimal, upper, status, solver = np.arange(useful.size), True, total, \
-            ("nothing to cover" if useful.size == 0 else "all useful views fit the budget"), "none"
+    if n_useful <= k:
+        chosen, optimal, upper, status, solver = np.arange(n_useful), True, total, \
+            ("nothing to cover" if n_useful == 0 else "all useful views fit the budget"), "none"
     else:
         chosen, optimal, bound, status = _solve(members, class_weights, k, integral, config)
         solver = config.solver

@@ -1,4 +1,5 @@
-"""Figures of the experiments (offscreen PNG): the coverage-effort trade-off and per-species bars."""
+"""Figures of the experiments (offscreen PNG): the coverage-effort trade-off, per-species bars and
+the comparison of GMC, Ours and the exact optimum on one case."""
 
 from __future__ import annotations
 
@@ -62,5 +63,57 @@ def plot_species_bars(path, table: pd.DataFrame, value: str = "views", title: st
     ax.set_ylabel(value.replace("_", " "))
     ax.set_title(title or f"Ours: {value} per species and view space")
     ax.grid(axis="y", alpha=0.3)
+    fig.tight_layout()
+    return _save(fig, path)
+
+
+_COMPARISON_LABELS = {"gmc": "GMC (sequential NBV)", "ours": "Ours (one-shot)", "optimum": "exact optimum"}
+
+
+def plot_method_comparison(path, scene, plans, title: str = ""):
+    """The paper's comparison figure: one column per plan (``ComparedPlan``: GMC, Ours, optimum at
+    the same view count). Top: the plant, the candidate views (grey), the executed views numbered in
+    execution order and the path. Bottom: the plant's ground-truth voxels seen from below, covered
+    (blue) and observable but missed (red, drawn larger and on top)."""
+    from tpvp.viz.figures import _equal_axes, _subsample
+
+    space = scene.view_space
+    plant = scene.grid.countable
+    centres = scene.grid.centres[plant]
+    observable = np.zeros(scene.grid.size, dtype=bool)
+    observable[scene.oracle] = True
+    fig = plt.figure(figsize=(5.2 * len(plans), 10))
+    (shown,) = _subsample(scene.current, limit=8000)
+    for column, plan in enumerate(plans):
+        ax = fig.add_subplot(2, len(plans), column + 1, projection="3d")
+        ax.scatter(*shown.T, s=0.3, c="tab:green", alpha=0.4, linewidths=0)
+        ax.scatter(*space.positions.T, s=6, c="lightgrey")
+        executed = space.positions[plan.order]
+        ax.scatter(*executed.T, s=36, c="tab:red", marker="^", depthshade=False)
+        for i, p in enumerate(executed, start=1):
+            ax.text(*p, f" {i}", fontsize=7)
+        ax.plot(*plan.polyline.T, c="purple", lw=1.3)
+        _equal_axes(ax, np.concatenate([space.positions, shown]))
+        ax.set_title(f"{_COMPARISON_LABELS.get(plan.method, plan.method)}\n{len(plan.order)} views, "
+                     f"{100 * plan.coverage:.2f} % coverage, {plan.path_length:.2f} m path\n{plan.note}", fontsize=9)
+        ax.tick_params(labelsize=6)
+
+        ax = fig.add_subplot(2, len(plans), len(plans) + column + 1, projection="3d")
+        ax.computed_zorder = False
+        hit = plan.covered[plant] & observable[plant]
+        missed = ~plan.covered[plant] & observable[plant]
+        (blue,) = _subsample(centres[hit], limit=15000)
+        ax.scatter(*blue.T, s=1.5, c="tab:blue", alpha=0.45, linewidths=0, depthshade=False, zorder=1,
+                   label=f"covered ({int(hit.sum())})")
+        ax.scatter(*centres[missed].T, s=14, c="red", edgecolors="darkred", linewidths=0.4, depthshade=False,
+                   zorder=2, label=f"missed ({int(missed.sum())})")
+        _equal_axes(ax, centres)
+        ax.view_init(elev=-55, azim=120)
+        ax.legend(loc="upper left", fontsize=7, markerscale=2)
+        ax.text2D(0.5, -0.08, "ground-truth voxels from below (elevation -55 deg)", transform=ax.transAxes,
+                  ha="center", va="top", fontsize=8)
+        ax.tick_params(labelsize=6)
+    if title:
+        fig.suptitle(title)
     fig.tight_layout()
     return _save(fig, path)

@@ -26,11 +26,12 @@ def display_points(points, limit: int = MAX_DISPLAY_POINTS) -> tuple[np.ndarray,
 
 
 def write_recording(path, clouds: dict, cameras: dict | None = None, paths: dict | None = None,
-                    application: str = "tpvp") -> Path:
+                    application: str = "tpvp", path_colours: dict | None = None) -> Path:
     """Save a rerun recording.
 
     ``clouds``: name -> (points, rgb colour tuple); ``cameras``: group name -> (positions, look_ats);
-    ``paths``: name -> polyline ``(n, 3)``. Frusta use the D435 intrinsics. Clouds of more than
+    ``paths``: name -> polyline ``(n, 3)`` (purple unless ``path_colours`` names an rgb). Frusta
+    use the D435 intrinsics. Clouds of more than
     :data:`MAX_DISPLAY_POINTS` points are logged as a deterministic subsample, noted in the
     recording (entity ``notes/display``).
     """
@@ -65,7 +66,8 @@ def write_recording(path, clouds: dict, cameras: dict | None = None, paths: dict
                                                  image_plane_distance=0.03), static=True)
         for name, polyline in (paths or {}).items():
             recording.log(f"world/{name}", rr.LineStrips3D([np.asarray(polyline, dtype=np.float32)],
-                                                           colors=(128, 0, 160)), static=True)
+                                                           colors=(path_colours or {}).get(name, (128, 0, 160))),
+                          static=True)
         recording.flush()
         recording.disconnect()
     return path
