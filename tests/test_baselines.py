@@ -3,6 +3,7 @@
 import itertools
 
 import numpy as np
+import pandas as pd
 import pytest
 from scipy import sparse
 
@@ -171,3 +172,25 @@ def test_optimum(small_case):
     for bad in ((0.0,), (1.2,), (), ("x",), -0.5):
         with pytest.raises(ConfigError, match="targets"):
             optimum(scene, config, targets=bad)
+
+
+def test_coverage_frontier(small_case, tmp_path):
+    from tpvp.experiments.frontier import FRONTIER_COLUMNS, coverage_frontier, write_frontier
+    from tpvp.experiments.single_plant import run_case
+    from tpvp.viz.experiments import plot_frontier
+
+    scene, config = small_case
+    frontier = coverage_frontier(scene, config, targets=(1.0, 0.8, 0.95, 0.9))
+    assert tuple(frontier.columns) == FRONTIER_COLUMNS and frontier["target"].tolist() == [0.8, 0.9, 0.95, 1.0]
+    assert np.all(np.diff(frontier["views"]) >= 0) and np.all(np.diff(frontier["optimum_views"]) >= 0)
+    reached = frontier[frontier["coverage"] >= frontier["target"]]
+    assert len(reached) and (reached["optimum_views"] <= reached["views"]).all()  # nothing beats the optimum
+    assert (frontier["optimum_coverage"] >= frontier["target"] - 1e-12).all()
+    full = run_case(scene, config)  # target 1.0 is today's plan
+    last = frontier.iloc[-1]
+    assert last["views"] == full.n_views and last["coverage"] == pytest.approx(full.coverage)
+    assert plot_frontier(tmp_path / "frontier.png", frontier).stat().st_size > 0
+    written = write_frontier(tmp_path / "out", scene, config, targets=(0.9, 1.0))
+    assert written["figure"].is_file() and len(pd.read_csv(written["csv"])) == 2
+    with pytest.raises(ConfigError, match="coverage targets"):
+        coverage_frontier(scene, config, targets=(0.0, 0.9))

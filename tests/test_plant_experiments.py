@@ -38,6 +38,13 @@ def test_every_method_gives_rows_for_every_case(raw, tiny_cases):
     assert (ours["coverage"] > 0.8).all() and (ours["views"] >= 2).all()
     optimum = table[table["method"] == "optimum"]
     assert set(optimum["target"]) == {1.0, 0.98}
+    one_shot = table[table["optimum_views_same_coverage"].notna()]
+    assert set(one_shot["method"]) == {"ours", "ours-no-inflation", "initial-view-only",
+                                       "initial-view-only-no-inflation", "one-shot-no-prior"}
+    # nothing sees as much with fewer views than the optimum; the full optimum bounds it from above
+    assert (one_shot["optimum_views_same_coverage"] <= one_shot["views"]).all()
+    full = optimum[optimum["target"] == 1.0].set_index("initial_view")["views"]
+    assert (one_shot["optimum_views_same_coverage"] <= one_shot["initial_view"].map(full)).all()
 
 
 def test_tables_hold_every_method_row(raw):

@@ -104,9 +104,30 @@ def test_a_dummy_selection_method_sees_the_problem_and_its_choice_is_executed(sc
     assert sorted(result.executed_views + result.planned_views) == list(range(32))
 
 
-def test_set_cover_refuses_a_partial_target(scene):
-    with pytest.raises(ConfigError, match="coverage_target"):
-        run_case(scene, make_config("plant", {**FAST, "selection.coverage_target": 0.98}))
+def test_a_coverage_target_takes_fewer_views_and_uses_only_what_the_robot_has(scene):
+    from dataclasses import replace
+
+    from scipy import sparse
+
+    full = run_case(scene, make_config("plant", FAST))
+    part = run_case(scene, make_config("plant", {**FAST, "selection.coverage_target": 0.9}))
+    assert part.executed_views == full.executed_views
+    assert len(part.planned_views) < len(full.planned_views) and part.selection.optimal
+    details = part.selection.details
+    assert details.covered_weight >= 0.9 * details.achievable_weight - 1e-9 and details.reachable
+    # Ground truth that no executed view saw is not known to the robot: changing it (here: every
+    # unexecuted view's observation) must not change the plan.
+    truth = sparse.lil_matrix(scene.truth_visibility)
+    rng = np.random.default_rng(0)
+    for view in set(range(truth.shape[0])) - set(part.executed_views):
+        truth.rows[view] = sorted(rng.choice(truth.shape[1], size=50, replace=False).tolist())
+        truth.data[view] = [True] * 50
+    changed = replace(scene, truth_visibility=sparse.csr_matrix(truth))
+    again = run_case(changed, make_config("plant", {**FAST, "selection.coverage_target": 0.9}))
+    assert again.planned_views == part.planned_views and again.coverage != part.coverage
+    for bad in (0.0, 1.5, -0.1):
+        with pytest.raises(ConfigError, match="coverage_target"):
+            make_config("plant", {"selection.coverage_target": bad})
 
 
 def test_a_view_space_file_with_origin_look_ats_reproduces_the_hemisphere(tmp_path, pair):

@@ -47,7 +47,8 @@ def _config(args):
         initial = int(initial)
     for key, value in (("view_space", getattr(args, "view_space", None)), ("initial_view", initial),
                        ("scene.scale", getattr(args, "scale", None)), ("scene.radius", getattr(args, "radius", None)),
-                       ("scene.up_axis", getattr(args, "up_axis", None))):
+                       ("scene.up_axis", getattr(args, "up_axis", None)),
+                       ("selection.coverage_target", getattr(args, "coverage_target", None))):
         if value is not None:
             overrides[key] = value
     overrides.update(parse_overrides(args.set))
@@ -198,6 +199,10 @@ def build_parser() -> argparse.ArgumentParser:
         p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                        help="override one configuration key, e.g. --set registration.embedded_deformation.iterations=100 "
                             "(repeatable; `tpvp config --derived` lists the keys)")
+        p.add_argument("--coverage-target", default=None, type=float, metavar="FRACTION",
+                       help="fraction of the planning surface the plan must see, e.g. 0.98: the fewest views for "
+                            "it (exact partial set cover); 1.0 = the paper's full set cover (default: the "
+                            "configuration's, 1.0)")
         if not case_options:
             return
         p.add_argument("--view-space", default=None, type=_view_space_arg, metavar="SPACE",

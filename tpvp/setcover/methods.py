@@ -10,14 +10,17 @@ method's state (its occupancy map and view state of what was observed). A new me
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from tpvp.errors import ConfigError
+from scipy import sparse
+
 from tpvp.registry import Registry
 from tpvp.setcover.ilp import solve_set_cover
+from tpvp.setcover.partial import partial_set_cover
 
 SELECTION_METHODS = Registry("view-selection method")
 
@@ -45,7 +48,7 @@ class Selection:
     """Selected views (sorted indices, executed ones excluded) and what is known of their quality.
 
     optimal: proven fewest views for the target. status: in words. details: the method's own
-    result (``SetCoverResult`` for ``set-cover``: bound, gap, dropped voxels, solver)."""
+    result (for ``set-cover``: ``SetCoverResult`` at target 1.0, else ``PartialCoverResult``)."""
 
     selected: np.ndarray
     optimal: bool
@@ -56,13 +59,26 @@ class Selection:
 
 @SELECTION_METHODS.register("set-cover")
 def set_cover(problem: SelectionProblem, config) -> Selection:
-    """The paper's selection: the fewest views that see every coverable planning voxel (exact ILP)."""
-    if problem.coverage_target < 1.0:
-        raise ConfigError(f"selection.coverage_target={problem.coverage_target:g} needs a partial-cover "
-                          f"selection method; 'set-cover' covers everything (target 1.0)")
+    """The paper's selection: the fewest views that see every coverable planning voxel (exact ILP).
+    With ``coverage_target`` t < 1: the fewest views that see at least ``ceil(t x coverable)``
+    planning voxels (or that share of the voxel weights), executed views included (exact partial
+    set-cover ILP, :func:`tpvp.setcover.partial.partial_set_cover`)."""
     t0 = time.perf_counter()
-    result = solve_set_cover(problem.visibility, executed=problem.executed, config=config.set_cover)
-    return Selection(result.selected, result.optimal, result.status, time.perf_counter() - t0, result)
+    if problem.coverage_target >= 1.0:
+        result = solve_set_cover(problem.visibility, executed=problem.executed, config=config.set_cover)
+        return Selection(result.selected, result.optimal, result.status, time.perf_counter() - t0, result)
+    matrix = sparse.csr_matrix(problem.visibility)
+    weights = np.ones(matrix.shape[1]) if problem.voxel_weights is None else np.asarray(problem.voxel_weights, float)
+    coverable = np.zeros(matrix.shape[1], dtype=bool)
+    coverable[matrix.indices] = True
+    total = float(weights[coverable].sum())
+    required = math.ceil(problem.coverage_target * total - 1e-9) if problem.voxel_weights is None \
+        else problem.coverage_target * total
+    result = partial_set_cover(matrix, required, executed=problem.executed, config=config.set_cover,
+                               weights=problem.voxel_weights)
+    status = (f"{result.status}; {100 * result.covered_weight / total:.2f} % of the coverable planning surface"
+              if total else result.status)
+    return Selection(result.selected, result.optimal, status, time.perf_counter() - t0, result)
 
 
 def select_views(problem: SelectionProblem, config) -> Selection:

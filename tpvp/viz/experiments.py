@@ -117,3 +117,25 @@ def plot_method_comparison(path, scene, plans, title: str = ""):
         fig.suptitle(title)
     fig.tight_layout()
     return _save(fig, path)
+
+
+def plot_frontier(path, frontier: pd.DataFrame, title: str = ""):
+    """The coverage-effort frontier of one case (``tpvp.experiments.frontier.coverage_frontier``):
+    true coverage vs views and vs path length for each planning target (labelled), beside the
+    exact optimum for the same target with perfect knowledge."""
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
+    for ax, (x, x_optimum, label) in zip(axes, (("views", "optimum_views", "views (initial and warm-up included)"),
+                                                ("path_length_m", "optimum_path_length_m", "path length (m)"))):
+        ax.plot(frontier[x], 100 * frontier["coverage"], "o-", color="tab:red", label="Ours at a planning target")
+        for row in frontier.itertuples():
+            ax.annotate(f"{100 * row.target:g}", (getattr(row, x), 100 * row.coverage), fontsize=7,
+                        textcoords="offset points", xytext=(3, -9))
+        ax.plot(frontier[x_optimum], 100 * frontier["optimum_coverage"], "*--", color="black",
+                label="exact optimum (perfect knowledge)")
+        ax.set_xlabel(label)
+        ax.set_ylabel("true coverage of the oracle set (%)")
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=8, loc="lower right")
+    fig.suptitle(title or "Coverage-effort frontier (labels: planning target, %)")
+    fig.tight_layout()
+    return _save(fig, path)

@@ -1,0 +1,61 @@
+"""The coverage-effort frontier of one case in one call: for each coverage target on the predicted
+planning surface, the plan's views, path and true coverage, beside the exact optimum with perfect
+knowledge of today's plant for the same true-coverage target.
+
+The warm-up and registration are computed once and shared by every target (they do not depend on
+it); each target then costs one selection (exact partial set cover) and one path.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from tpvp.config import PlantConfig, make_config
+from tpvp.errors import ConfigError
+from tpvp.experiments.baselines import optimum
+from tpvp.experiments.single_plant import Scene, run_case, transfer
+
+DEFAULT_TARGETS = (0.90, 0.92, 0.94, 0.95, 0.96, 0.97, 0.98, 0.99, 0.995, 1.0)
+FRONTIER_COLUMNS = ("target", "views", "coverage", "path_length_m", "selection_optimal", "optimum_views",
+                    "optimum_coverage", "optimum_path_length_m", "optimum_optimal")
+
+
+def coverage_frontier(scene: Scene, config: PlantConfig, targets=DEFAULT_TARGETS) -> pd.DataFrame:
+    """One row per target t (ascending): the plan for ``selection.coverage_target = t`` (views with
+    the initial and warm-up views, true coverage of the oracle, path in m) and the exact optimum
+    on the ground truth for t of the oracle (``optimum_*``), from the same initial view."""
+    from tpvp.config import flatten_keys, to_dict
+
+    values = sorted({float(t) for t in np.atleast_1d(np.asarray(targets, dtype=float))})
+    if not values or values[0] <= 0 or values[-1] > 1:
+        raise ConfigError(f"coverage targets must be fractions in (0, 1], got {list(targets)!r}")
+    flat = flatten_keys(to_dict(config))
+    shared = transfer(scene, config)
+    best = optimum(scene, config, targets=tuple(values)).set_index("target")
+    rows = []
+    for target in values:
+        result = run_case(scene, make_config("plant", flat | {"selection.coverage_target": target}),
+                          transferred=shared)
+        limit = best.loc[target]
+        rows.append({"target": target, "views": result.n_views, "coverage": result.coverage,
+                     "path_length_m": result.path_length, "selection_optimal": bool(result.selection.optimal),
+                     "optimum_views": int(limit["views"]), "optimum_coverage": float(limit["coverage"]),
+                     "optimum_path_length_m": float(limit["path_length"]), "optimum_optimal": bool(limit["optimal"])})
+    return pd.DataFrame(rows, columns=list(FRONTIER_COLUMNS))
+
+
+def write_frontier(folder, scene: Scene, config: PlantConfig, targets=DEFAULT_TARGETS, title: str = "") -> dict:
+    """:func:`coverage_frontier` as ``frontier.csv`` and ``frontier.png`` in ``folder`` (published
+    whole or not at all)."""
+    from pathlib import Path
+
+    from tpvp.io import atomic_write_text
+    from tpvp.io.publish import staged_folder
+    from tpvp.viz.experiments import plot_frontier
+
+    frontier = coverage_frontier(scene, config, targets)
+    with staged_folder(folder) as stage:
+        atomic_write_text(stage.folder / "frontier.csv", frontier.to_csv(index=False))
+        plot_frontier(stage.folder / "frontier.png", frontier, title)
+    return {"table": frontier, "csv": Path(folder) / "frontier.csv", "figure": Path(folder) / "frontier.png"}
