@@ -118,3 +118,13 @@ def test_a_previous_session_of_another_plant_is_warned_about(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "warning: registration of" in err and "maize.xyz" in err and "same plant" in err
     assert "same plant" in json.loads((tmp_path / "o" / "results.json").read_text())["warnings"]
+
+
+def test_demo_with_a_coverage_target_takes_fewer_views(tmp_path, capsys):
+    assert main(["demo", "--coverage-target", "0.95", "--output", str(tmp_path / "out")]) == 0
+    out = capsys.readouterr().out
+    assert "of the coverable planning surface" in out
+    results = json.loads((tmp_path / "out" / "results.json").read_text())
+    assert results["set_cover_covered_weight"] >= 0.95 * results["set_cover_achievable_weight"]
+    assert results["views"] < 7 and results["set_cover_optimal"]  # the full set cover takes 7 (README)
+    assert "coverage_target: 0.95" in (tmp_path / "out" / "config.yaml").read_text()

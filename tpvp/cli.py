@@ -26,7 +26,7 @@ def _print_case(result, summary, folder, compile_seconds):
             ("Chamfer transferred vs coarse", f"{summary['chamfer_before_mm']:.2f} -> {summary['chamfer_after_mm']:.2f} mm"),
             ("view selection", f"{len(result.planned_views)} views, optimal={result.selection.optimal}"
              + (f", {result.set_cover.n_dropped_infeasible} unreachable voxels dropped"
-                if hasattr(result.set_cover, "n_dropped_infeasible") else "")),
+                if hasattr(result.set_cover, "n_dropped_infeasible") else f"; {result.selection.status}")),
             ("time: warm-up / registration", f"{result.timings['warm_up']:.2f} s / {result.timings['registration']:.2f} s"),
             ("time: planning (inflation..path)", f"{result.timings['planning']:.2f} s"),
             ("time: numba compile / cache load", f"{compile_seconds:.2f} s (not part of the run)")]

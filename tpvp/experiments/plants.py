@@ -5,7 +5,8 @@ protocol: 2 species x 3 instances x 2 rotations x 3 initial views per view space
 named entry of :data:`PLANT_METHODS` that turns a case's scene into result rows. Every
 (case, method) task is independent; its rows are cached on disk (Parquet, atomic writes) under a
 key hashing the case, the method, the resolved configuration, the package version and its source
-code, so a changed method never reuses stale rows, an interrupted run resumes, and a finished one re-renders instantly.
+code, so a changed method never reuses stale rows, an interrupted run resumes, and a finished one
+re-renders instantly.
 """
 
 from __future__ import annotations

@@ -88,8 +88,13 @@ class CaseResult:
         solver = {}
         if details is not None and hasattr(details, "objective"):
             solver = {"set_cover_objective": details.objective, "set_cover_bound": details.bound,
-                      "set_cover_gap": details.gap, "set_cover_optimal": details.optimal,
-                      "set_cover_dropped_voxels": details.n_dropped_infeasible}
+                      "set_cover_gap": details.gap, "set_cover_optimal": details.optimal}
+            if hasattr(details, "n_dropped_infeasible"):  # full set cover
+                solver["set_cover_dropped_voxels"] = details.n_dropped_infeasible
+            else:  # partial set cover (a coverage target below 1)
+                solver.update(set_cover_required_weight=details.required_weight,
+                              set_cover_covered_weight=details.covered_weight,
+                              set_cover_achievable_weight=details.achievable_weight)
         return {
             "views": self.n_views, "coverage": self.coverage, "path_length_m": self.path_length,
             "warm_up_views": len(self.executed_views), "planned_views": len(self.planned_views),
