@@ -80,9 +80,11 @@ def _write_folder(root, files):
 
 
 def _write_zip(path, files, compression=zipfile.ZIP_DEFLATED):
+    # A fixed member date: the same files give the same bytes (tests compare an archive with a
+    # rewritten copy to prove it was not modified; writestr(name) would stamp the current time).
     with zipfile.ZipFile(path, "w", compression=compression) as zf:
         for name, (content, _) in files.items():
-            zf.writestr(name, content)
+            zf.writestr(zipfile.ZipInfo(name, date_time=(2020, 3, 6, 0, 0, 0)), content, compress_type=compression)
     return path
 
 
