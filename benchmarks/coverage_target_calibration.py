@@ -19,7 +19,7 @@ import pandas as pd
 
 from tpvp.config import make_config
 from tpvp.experiments import plants
-from tpvp.experiments.single_plant import run_case, transfer
+from tpvp.experiments.single_plant import build_scene, run_case, transfer
 from tpvp.jit import compile_kernels
 
 
@@ -38,7 +38,7 @@ def main() -> None:
     t0 = time.perf_counter()
     for case in cases:
         config = case.config(base)
-        scene = plants._scene(case, config)
+        scene = build_scene(*case.instance.load(), config)
         shared = transfer(scene, config)
         for target in args.targets:
             result = run_case(scene, make_config("plant", plants.to_flat(config) | {"selection.coverage_target": target}),

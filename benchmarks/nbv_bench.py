@@ -28,7 +28,6 @@ import os
 import platform
 import sys
 import time
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -43,6 +42,7 @@ import pandas as pd
 
 from tpvp.config import make_config
 from tpvp.experiments import plants
+from tpvp.experiments.single_plant import build_scene
 from tpvp.jit import compile_kernels
 from tpvp.nbv import OccupancyMap, information_gain
 from tpvp.nbv.information_gain import next_best_view
@@ -68,7 +68,7 @@ def _scene(species: str, view_space: str):
     instance = [i for i in plants.generated_instances() if i.species == species][0]
     case = plants.Case(instance, view_space, 0.0, 17)
     case_config = case.config(config)
-    scene = plants._scene(replace(case, initial_view=0), replace(case_config, initial_view=0))
+    scene = build_scene(*instance.load(), case_config)
     return scene, case_config
 
 

@@ -36,7 +36,7 @@ from scipy import sparse
 
 from tpvp.errors import ConfigError
 from tpvp.setcover.ilp import SetCoverConfig
-from tpvp.setcover.maxcover import _prune, coverage_model, reduce_coverage
+from tpvp.setcover.maxcover import _prune, _value, coverage_model, reduce_coverage
 from tpvp.solvers import solve_pulp_milp
 
 _TOLERANCE = 1e-9
@@ -133,7 +133,7 @@ def partial_set_cover(visibility, required, executed=(), config: SetCoverConfig 
         else:
             chosen, optimal, bound, status = _solve(members, class_weights, need, greedy.size, config)
             solver = config.solver
-            if chosen is None or _weight(members, class_weights, chosen) < need - 1e-6 or chosen.size > greedy.size:
+            if chosen is None or _value(members, class_weights, chosen) < need - 1e-6 or chosen.size > greedy.size:
                 chosen, optimal, status = np.sort(greedy), False, f"{status}; greedy fallback"
             # Views the others make redundant (possible in a time-limited incumbent) are dropped.
             chosen = _prune(members, class_weights, chosen)
@@ -158,8 +158,3 @@ def partial_set_cover(visibility, required, executed=(), config: SetCoverConfig 
         solve_seconds=time.perf_counter() - t0, n_voxels=int(n_voxels), n_classes=int(members.shape[0]),
         solver=solver)
 
-
-def _weight(members: sparse.csr_matrix, weights: np.ndarray, chosen: np.ndarray) -> float:
-    if chosen.size == 0:
-        return 0.0
-    return float(weights[np.asarray(members[:, chosen].sum(axis=1)).ravel() > 0].sum())
