@@ -45,6 +45,8 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/sensor_bench.py
 	$(BIN)/python benchmarks/oracle_bench.py
 	$(BIN)/python benchmarks/plant_realism.py
+	$(BIN)/python benchmarks/planning_bench.py
+	$(BIN)/python benchmarks/registration_bench.py
 	$(BIN)/python benchmarks/row_realism.py
 
 # Every notebook in full mode (the paper's protocol); CI runs them in quick mode (make test).

@@ -128,3 +128,21 @@ def test_demo_with_a_coverage_target_takes_fewer_views(tmp_path, capsys):
     assert results["set_cover_covered_weight"] >= 0.95 * results["set_cover_achievable_weight"]
     assert results["views"] < 7 and results["set_cover_optimal"]  # the full set cover takes 7 (README)
     assert "coverage_target: 0.95" in (tmp_path / "out" / "config.yaml").read_text()
+
+
+def test_demo_frontier_writes_the_table_and_figure(tmp_path, capsys):
+    """--frontier adds the coverage-effort frontier of the case: one row per target, the plan's views
+    never fewer for a higher target, the optimum never more views than the plan reaching the same
+    true coverage would need."""
+    import pandas as pd
+
+    assert main(["demo", "--frontier", "--output", str(tmp_path / "out")]) == 0
+    out = capsys.readouterr().out
+    assert "coverage-effort frontier" in out
+    frontier = pd.read_csv(tmp_path / "out" / "frontier.csv")
+    assert (tmp_path / "out" / "frontier.png").stat().st_size > 10_000
+    assert list(frontier["target"]) == sorted(frontier["target"]) and frontier["target"].iloc[-1] == 1.0
+    assert frontier["views"].is_monotonic_increasing and frontier["optimum_views"].is_monotonic_increasing
+    assert (frontier["optimum_coverage"] >= frontier["target"] - 1e-12).all()
+    results = json.loads((tmp_path / "out" / "results.json").read_text())
+    assert frontier["views"].iloc[-1] == results["views"]  # target 1.0 is the plan of the run itself

@@ -59,7 +59,16 @@ def _config(args):
     return config
 
 
-def _run_pair(previous, current, output, config, name="case", inputs=(), names=None):
+def _print_frontier(frontier) -> None:
+    print("coverage-effort frontier (plan per target on the prediction; optimum = perfect knowledge of "
+          "today's plant):")
+    table = frontier[["target", "views", "coverage", "path_length_m", "optimum_views", "optimum_coverage"]].copy()
+    for column in ("coverage", "optimum_coverage"):
+        table[column] = (100 * table[column]).map("{:.2f} %".format)
+    print(table.to_string(index=False, float_format=lambda x: f"{x:.3g}"))
+
+
+def _run_pair(previous, current, output, config, name="case", inputs=(), names=None, frontier=False):
     from tqdm.auto import tqdm
 
     from tpvp.experiments.outputs import write_case_outputs
@@ -83,7 +92,15 @@ def _run_pair(previous, current, output, config, name="case", inputs=(), names=N
                                      extra_summary={"seconds_compile": compile_seconds})
         summary = json.loads(written["results"].read_text())
         bar.update(1)
+        if frontier:
+            from tpvp.experiments.frontier import coverage_frontier, write_frontier_files
+
+            bar.set_postfix_str("frontier")
+            frontier = write_frontier_files(stage.folder, coverage_frontier(scene, config), name)["table"]
     _print_case(result, summary, stage.destination, compile_seconds)
+    if frontier is not False:
+        _print_frontier(frontier)
+        print("  (also frontier.csv, frontier.png)")
     reduction = scene.reduction
     for which in ("previous", "current"):
         if reduction[f"{which}_points_used"] < reduction[f"{which}_points"]:
@@ -102,7 +119,7 @@ def _demo(args) -> int:
     print("bundled real tomato (Pheno4D): previous session 2020-03-05, current 2020-03-06, "
           f"{config.view_space} view space, configuration {config.name!r}")
     return _run_pair(load_sample("tomato_0305"), load_sample("tomato_0306"), args.output, config,
-                     name="tomato 03-05 -> 03-06")
+                     name="tomato 03-05 -> 03-06", frontier=args.frontier)
 
 
 def _plan(args) -> int:
@@ -115,7 +132,8 @@ def _plan(args) -> int:
                                               drop_invalid=args.drop_invalid)
     print(f"{args.previous.name}: units: {previous_units}; {args.current.name}: units: {current_units}")
     return _run_pair(previous, current, args.output, config, name=args.current.name,
-                     inputs=(args.previous, args.current), names=(str(args.previous), str(args.current)))
+                     inputs=(args.previous, args.current), names=(str(args.previous), str(args.current)),
+                     frontier=args.frontier)
 
 
 def _render(args) -> int:
@@ -200,11 +218,16 @@ def build_parser() -> argparse.ArgumentParser:
                        help="override one configuration key, e.g. --set registration.embedded_deformation.iterations=100 "
                             "(repeatable; `tpvp config --derived` lists the keys)")
         p.add_argument("--coverage-target", default=None, type=float, metavar="FRACTION",
-                       help="fraction of the planning surface the plan must see, e.g. 0.98: the fewest views for "
-                            "it (exact partial set cover); 1.0 = the paper's full set cover (default: the "
-                            "configuration's, 1.0)")
+                       help="coverage of today's plant to aim for, e.g. 0.98: the fewest views that see "
+                            "1 - r x (1 - target) of the predicted planning surface (exact partial set cover; r "
+                            "calibrated per view space, selection.planning_miss_ratio); 1.0 = the paper's full set "
+                            "cover (default: the configuration's, 1.0)")
         if not case_options:
             return
+        p.add_argument("--frontier", action="store_true",
+                       help="also the coverage-effort frontier of this case: the plan for targets 0.90 ... 1.0 "
+                            "beside the exact optimum with perfect knowledge (frontier.csv, frontier.png; "
+                            "about 10-60 s more)")
         p.add_argument("--view-space", default=None, type=_view_space_arg, metavar="SPACE",
                        help=f"candidate views: {view_space_choices()} (default: the configuration's, hemisphere)")
         p.add_argument("--initial-view", default=None, metavar="INDEX|NAME",

@@ -106,7 +106,7 @@ def nbv_curve(scene, config: PlantConfig = PlantConfig(), max_views: int = 20) -
     n_oracle = int(is_oracle.sum())
     covered = np.zeros(truth.shape[1], dtype=bool)
 
-    nbv = make_nbv(NbvContext(space, centre, scene.sensor, config.nbv))
+    nbv = make_nbv(NbvContext(space, centre, scene.sensor, config.nbv, prior=scene.previous))
     observed: list[np.ndarray] = []
     rows = []
     path = 0.0

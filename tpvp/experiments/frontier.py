@@ -21,17 +21,18 @@ FRONTIER_COLUMNS = ("target", "views", "coverage", "path_length_m", "selection_o
                     "optimum_coverage", "optimum_path_length_m", "optimum_optimal")
 
 
-def coverage_frontier(scene: Scene, config: PlantConfig, targets=DEFAULT_TARGETS) -> pd.DataFrame:
+def coverage_frontier(scene: Scene, config: PlantConfig, targets=DEFAULT_TARGETS, transferred=None) -> pd.DataFrame:
     """One row per target t (ascending): the plan for ``selection.coverage_target = t`` (views with
     the initial and warm-up views, true coverage of the oracle, path in m) and the exact optimum
-    on the ground truth for t of the oracle (``optimum_*``), from the same initial view."""
+    on the ground truth for t of the oracle (``optimum_*``), from the same initial view.
+    ``transferred``: the case's :func:`transfer` when already computed."""
     from tpvp.config import flatten_keys, to_dict
 
     values = sorted({float(t) for t in np.atleast_1d(np.asarray(targets, dtype=float))})
     if not values or values[0] <= 0 or values[-1] > 1:
         raise ConfigError(f"coverage targets must be fractions in (0, 1], got {list(targets)!r}")
     flat = flatten_keys(to_dict(config))
-    shared = transfer(scene, config)
+    shared = transferred or transfer(scene, config)
     best = optimum(scene, config, targets=tuple(values)).set_index("target")
     rows = []
     for target in values:
@@ -45,17 +46,28 @@ def coverage_frontier(scene: Scene, config: PlantConfig, targets=DEFAULT_TARGETS
     return pd.DataFrame(rows, columns=list(FRONTIER_COLUMNS))
 
 
+def write_frontier_files(folder, frontier: pd.DataFrame, title: str = "") -> dict:
+    """``frontier.csv`` and ``frontier.png`` of a :func:`coverage_frontier` table in ``folder``
+    (each file written atomically; ``folder`` is usually a staged output folder)."""
+    from pathlib import Path
+
+    from tpvp.io import atomic_write_text
+    from tpvp.viz.experiments import plot_frontier
+
+    folder = Path(folder)
+    atomic_write_text(folder / "frontier.csv", frontier.to_csv(index=False))
+    plot_frontier(folder / "frontier.png", frontier, title)
+    return {"table": frontier, "csv": folder / "frontier.csv", "figure": folder / "frontier.png"}
+
+
 def write_frontier(folder, scene: Scene, config: PlantConfig, targets=DEFAULT_TARGETS, title: str = "") -> dict:
     """:func:`coverage_frontier` as ``frontier.csv`` and ``frontier.png`` in ``folder`` (published
     whole or not at all)."""
     from pathlib import Path
 
-    from tpvp.io import atomic_write_text
     from tpvp.io.publish import staged_folder
-    from tpvp.viz.experiments import plot_frontier
 
     frontier = coverage_frontier(scene, config, targets)
     with staged_folder(folder) as stage:
-        atomic_write_text(stage.folder / "frontier.csv", frontier.to_csv(index=False))
-        plot_frontier(stage.folder / "frontier.png", frontier, title)
+        write_frontier_files(stage.folder, frontier, title)
     return {"table": frontier, "csv": Path(folder) / "frontier.csv", "figure": Path(folder) / "frontier.png"}

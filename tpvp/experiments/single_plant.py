@@ -77,6 +77,7 @@ class CaseResult:
     clouds: dict  # coarse, previous, warped, inflation, planning (for figures and recordings)
     obstacle: tuple  # (centre, radius) of the path's collision sphere
     warnings: list = field(default_factory=list)  # plausibility warnings in the user's terms
+    planning_target: float = 1.0  # fraction of the planning surface the selection had to see
 
     @property
     def set_cover(self):
@@ -98,6 +99,7 @@ class CaseResult:
         return {
             "views": self.n_views, "coverage": self.coverage, "path_length_m": self.path_length,
             "warm_up_views": len(self.executed_views), "planned_views": len(self.planned_views),
+            "planning_target": self.planning_target,
             "coverage_after_warm_up": self.coverage_warm_up,
             "chamfer_before_mm": 1e3 * self.chamfer_before, "chamfer_after_mm": 1e3 * self.chamfer_after,
             "selection_optimal": bool(self.selection.optimal), "selection_status": self.selection.status,
@@ -183,7 +185,7 @@ def transfer(scene: Scene, config: PlantConfig = PlantConfig(), progress=None) -
 
     t = time.perf_counter()
     say("warm-up NBV")
-    nbv = make_nbv(NbvContext(space, np.zeros(3), scene.sensor, config.nbv))
+    nbv = make_nbv(NbvContext(space, np.zeros(3), scene.sensor, config.nbv, prior=scene.previous))
     nbv.integrate(initial, _observation(scene, initial))
     for _ in range(config.nbv.warm_up_views):
         choice = nbv.next_view()
@@ -228,7 +230,7 @@ def run_case(scene: Scene, config: PlantConfig = PlantConfig(), progress=None,
     t = time.perf_counter()
     say("view selection")
     problem = SelectionProblem(planning_visibility, tuple(executed), space, planning_grid.centres,
-                               config.selection.coverage_target, nbv=nbv)
+                               config.selection.planning_target(config.view_space), nbv=nbv)
     selection = select_views(problem, config.selection)
     timings["selection"] = time.perf_counter() - t
 
@@ -253,7 +255,7 @@ def run_case(scene: Scene, config: PlantConfig = PlantConfig(), progress=None,
         selection=selection, tsp=tsp, timings=timings,
         clouds={"coarse": np.unique(coarse, axis=0), "previous": scene.previous,
                 "warped": alignment.warped, "inflation": inflated.inflation, "planning": inflated.planning},
-        obstacle=(centre, radius), warnings=warnings,
+        obstacle=(centre, radius), warnings=warnings, planning_target=problem.coverage_target,
     )
 
 

@@ -8,6 +8,10 @@ Interface (sized for sequential and learned methods, not only the one-shot warm-
   ``method.next_view()`` returns an :class:`NbvChoice` among the views not yet executed.
 
 A new NBV method is one class with these two methods plus one ``@NBV_METHODS.register`` line.
+
+Registered: ``geometric`` (information gain on an occupancy map of what was observed; the default)
+and ``prior`` (:mod:`tpvp.nbv.prior`: the previous session's voxels that a view would observe and
+no executed view did; needs ``NbvContext.prior``).
 """
 
 from __future__ import annotations
@@ -26,12 +30,15 @@ NBV_METHODS = Registry("NBV method")
 @dataclass(frozen=True, eq=False)
 class NbvContext:
     """What an NBV method may know: the candidate views (``tpvp.viewspace.ViewSpace``: positions,
-    look-ats), the object centre, the sensor (``SensorConfig``) and its own ``NbvConfig``."""
+    look-ats), the object centre, the sensor (``SensorConfig``), its own ``NbvConfig`` and,
+    optionally, the previous session's model ``prior`` (``(N, 3)`` points in the planning frame;
+    None when there is none; methods that need it say so)."""
 
     view_space: object
     centre: np.ndarray
     sensor: object
     config: object
+    prior: np.ndarray | None = None
 
 
 @dataclass(frozen=True, eq=False)

@@ -3,8 +3,7 @@
 from tpvp.registration.embedded_deformation import (
     EDConfig,
     RegistrationResult,
-    axis_angle_to_matrix,
     register_embedded_deformation,
 )
 
-__all__ = ["EDConfig", "RegistrationResult", "axis_angle_to_matrix", "register_embedded_deformation"]
+__all__ = ["EDConfig", "RegistrationResult", "register_embedded_deformation"]

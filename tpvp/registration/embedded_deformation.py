@@ -35,15 +35,16 @@ Deviations (fixes):
   (x + sum_k w_k ((R_k - I)(x - g_k) + t_k), using sum_k w_k = 1): same maths, but zero parameters
   reproduce P bit for bit. In the reference's form rounding leaves ~1e-18 gradients at the identity,
   which Adam's per-coordinate normalisation turns into ~lr = 1 mm steps;
-* Adam and the exponential decay are written out (same numbers as torch.optim, checked by a test)
-  because torch.optim's first use imports torch._dynamo (~1.3 s);
+* Adam and the exponential decay are written out in numpy (:class:`_Adam`; torch.optim's numbers up
+  to the rounding of its fused multiply-adds, ~1e-15, checked by a test), so registering never
+  imports torch (~2 s of a command's start-up; torch.optim's first use imports torch._dynamo too);
 * the losses and their gradient are computed by hand (numba kernel :func:`_loss_and_gradient`), not
   by torch autograd: with ~1000-point tensors the reference spent its 10 ms per iteration on
   per-op and autograd overhead and on scipy KD-tree queries. Same maths (Rodrigues and its
   derivative, the displacement-form blend, ARAP, truncated Chamfer with the nearest neighbours held
-  fixed, the Laplacian with its weights held constant), same random subsets, same Adam (torch
-  ops on the shared memory of the parameters), same stop rule: the result equals the autograd
-  implementation (:func:`_optimise_autograd`, kept as the tests' oracle) up to rounding (~1e-17 m
+  fixed, the Laplacian with its weights held constant), same random subsets, same Adam, same
+  stop rule: the result equals the autograd implementation
+  (:func:`tpvp.registration.autograd_reference.optimise_autograd`, kept as the tests' oracle) up to rounding (~1e-17 m
   on the benchmark pairs after 300 iterations). The nearest neighbours come from an exact uniform
   grid search instead of scipy's KD-tree (:func:`_grid_knn`; among points at exactly equal
   distance it may pick another one: the same loss value, the gradient goes to the other point).
@@ -69,7 +70,6 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
-import torch
 from numba import njit
 from scipy.spatial import cKDTree
 
@@ -91,11 +91,10 @@ class EDConfig:
     chamfer_samples: points drawn from P~ and from Q per iteration (also the Laplacian subset).
     chamfer_truncation: squared distance (m^2) from which a Chamfer term is zeroed.
     stop_loss: stop when the total loss falls below this. max_nodes: refuse larger graphs (units).
-    threads: torch CPU threads during the call (None: leave torch's setting). Torch only runs the
-        Adam update, and that always on one thread (a second one spin-waits and slowed the numba
-        kernel between steps ~5x on a 2-core machine); the setting acts on the torch-autograd
-        reference (``_optimise_autograd``), where 2 threads were up to 5x slower too. The numba
-        kernels are serial.
+    threads: torch CPU threads of the torch-autograd reference
+        (:mod:`tpvp.registration.autograd_reference`; None: leave torch's setting; 2 threads were
+        up to 5x slower than 1 on a 2-core machine). The registration itself runs numpy and serial
+        numba kernels and never imports torch.
     """
 
     node_coverage: float = 0.004
@@ -260,64 +259,6 @@ def _warp_numpy(points, nodes, rotations, translations, idx, w) -> np.ndarray:
         moved = np.einsum("nkij,nkj->nki", rotations[i], local) - local + translations[i]
         out[block] = p + np.einsum("nk,nki->ni", w[block], moved)
     return out
-
-
-# --------------------------------------------------------------------------------------------------
-# torch pieces: axis_angle_to_matrix and the autograd reference (the oracle of tests and benchmark)
-# --------------------------------------------------------------------------------------------------
-
-
-def axis_angle_to_matrix(phi: torch.Tensor) -> torch.Tensor:
-    """Rodrigues' formula R = I + A [phi]x + B [phi]x^2 for (M, 3) axis-angle vectors."""
-    theta2 = (phi * phi).sum(-1)
-    small = theta2 < 1e-8
-    # evaluate sin/cos on a safe angle so that neither branch produces NaN gradients at 0
-    theta = torch.sqrt(torch.where(small, torch.ones_like(theta2), theta2))
-    a = torch.where(small, 1.0 - theta2 / 6.0 + theta2**2 / 120.0, torch.sin(theta) / theta)
-    b = torch.where(small, 0.5 - theta2 / 24.0 + theta2**2 / 720.0, (1.0 - torch.cos(theta)) / theta**2)
-    zero = torch.zeros_like(phi[:, 0])
-    K = torch.stack([zero, -phi[:, 2], phi[:, 1],
-                     phi[:, 2], zero, -phi[:, 0],
-                     -phi[:, 1], phi[:, 0], zero], dim=-1).reshape(-1, 3, 3)
-    eye = torch.eye(3, dtype=phi.dtype).expand_as(K)
-    return eye + a[:, None, None] * K + b[:, None, None] * (K @ K)
-
-
-def _warp_torch(x, g_a, w, R_a, t_a):
-    """ED blend of points x (n, 3) with anchor nodes g_a (n, k, 3), weights w (n, k), in the
-    displacement form of :func:`_warp_numpy` (exact identity at zero parameters)."""
-    local = x[:, None, :] - g_a
-    moved = torch.einsum("nkij,nkj->nki", R_a, local) - local + t_a
-    return x + (w[..., None] * moved).sum(1)
-
-
-def _chamfer_sq_torch(xs, qs, truncation):
-    """Two-sided squared Chamfer of two subsets, sum of the directed means (reference loss)."""
-    # The gradient flows through the distances only, not the NN choice, so the search can run in
-    # numpy; two 1000-point KD-trees are several times faster than a dense cdist + argmin on CPU.
-    xn, qn = xs.detach().numpy(), qs.detach().numpy()
-    nn_xq = torch.as_tensor(cKDTree(qn).query(xn)[1])
-    nn_qx = torch.as_tensor(cKDTree(xn).query(qn)[1])
-    a = ((xs - qs[nn_xq]) ** 2).sum(-1)
-    b = ((qs - xs[nn_qx]) ** 2).sum(-1)
-    a = torch.where(a < truncation, a, torch.zeros_like(a))
-    b = torch.where(b < truncation, b, torch.zeros_like(b))
-    return a.mean() + b.mean()
-
-
-def _laplacian_torch(x, k):
-    """Membrane Laplacian of a subset: mean of W_ij |x_i - x_j|^2 over its k-NN graph."""
-    k = min(k, len(x) - 1)
-    if k < 1:
-        return x.sum() * 0.0
-    d, nn = cKDTree(x.detach().numpy()).query(x.detach().numpy(), k=k + 1)
-    # drop the point itself (column 0; with duplicate points this drops one of the copies)
-    d, nn = torch.as_tensor(d[:, 1:]), torch.as_tensor(nn[:, 1:])
-    sigma = d.median().clamp_min(1e-12)
-    W = torch.exp(-(d**2) / (2 * sigma**2))  # held constant, as in the reference (no_grad)
-    W = W / W.sum(1, keepdim=True)
-    diff2 = ((x[:, None, :] - x[nn]) ** 2).sum(-1)
-    return (W * diff2).mean()
 
 
 # --------------------------------------------------------------------------------------------------
@@ -600,6 +541,25 @@ def _arap(R, t, g_ij, e_idx, e_w, scale, gR, g_t):
     return total * inv
 
 
+@njit(cache=True, error_model="numpy", inline="always")
+def _directed_chamfer(X, Qs, x_idx, q_idx, truncation, dX):
+    """Mean truncated squared distance over the pairs (X[x_idx[s]], Qs[q_idx[s]]); its gradient
+    with respect to X is added to dX."""
+    m = x_idx.shape[0]
+    c = 2.0 / m
+    total = 0.0
+    for s in range(m):
+        i, j = x_idx[s], q_idx[s]
+        e0, e1, e2 = X[i, 0] - Qs[j, 0], X[i, 1] - Qs[j, 1], X[i, 2] - Qs[j, 2]
+        d = e0 * e0 + e1 * e1 + e2 * e2
+        if d < truncation:
+            total += d
+            dX[i, 0] += c * e0
+            dX[i, 1] += c * e1
+            dX[i, 2] += c * e2
+    return total / m
+
+
 @njit(**_JIT)
 def _chamfer(X, Qs, truncation, dX):
     """Two-sided truncated squared Chamfer of two subsets (sum of the directed means) and its
@@ -612,29 +572,8 @@ def _chamfer(X, Qs, truncation, dX):
     d2_q = np.empty((nq, 1))
     _grid_knn(X, Qs, 1, idx_q, d2_q)
     dX[:] = 0.0
-    sa = 0.0
-    for s in range(n):
-        j = idx[s, 0]
-        e0, e1, e2 = X[s, 0] - Qs[j, 0], X[s, 1] - Qs[j, 1], X[s, 2] - Qs[j, 2]
-        a = e0 * e0 + e1 * e1 + e2 * e2
-        if a < truncation:
-            sa += a
-            c = 2.0 / n
-            dX[s, 0] += c * e0
-            dX[s, 1] += c * e1
-            dX[s, 2] += c * e2
-    sb = 0.0
-    for s in range(nq):
-        j = idx_q[s, 0]
-        e0, e1, e2 = X[j, 0] - Qs[s, 0], X[j, 1] - Qs[s, 1], X[j, 2] - Qs[s, 2]
-        b = e0 * e0 + e1 * e1 + e2 * e2
-        if b < truncation:
-            sb += b
-            c = 2.0 / nq
-            dX[j, 0] += c * e0
-            dX[j, 1] += c * e1
-            dX[j, 2] += c * e2
-    return sa / n + sb / nq
+    return (_directed_chamfer(X, Qs, np.arange(n), idx[:, 0], truncation, dX)
+            + _directed_chamfer(X, Qs, idx_q[:, 0], np.arange(nq), truncation, dX))
 
 
 @njit(**_JIT)
@@ -756,31 +695,26 @@ def register_embedded_deformation(P, Q, config: EDConfig | None = None) -> Regis
 
 def _register(P, Q, config, optimise) -> RegistrationResult:
     """:func:`register_embedded_deformation` with the optimiser as an argument: :func:`_optimise`
-    (analytic gradients, numba) or :func:`_optimise_autograd` (the torch-autograd reference that
-    tests and ``benchmarks/registration_bench.py`` compare it with)."""
+    (analytic gradients, numba) or :func:`tpvp.registration.autograd_reference.optimise_autograd`
+    (the torch-autograd reference that tests and ``benchmarks/registration_bench.py`` compare it
+    with)."""
     config = EDConfig() if config is None else config
     if not isinstance(config, EDConfig):
         raise ConfigError(f"config must be an EDConfig, got {type(config).__name__}")
     P = checked_cloud(P, "source cloud P")
     Q = checked_cloud(Q, "target cloud Q")
     _check_pair(P, Q, config.node_coverage)
-    old_threads = torch.get_num_threads()
-    if config.threads is not None:
-        torch.set_num_threads(config.threads)
-    try:
-        start = time.perf_counter()
-        nodes = voxels.voxel_centroids(P, config.node_coverage)
-        if len(nodes) > config.max_nodes:
-            raise PointCloudError(
-                f"source cloud P gives {len(nodes)} graph nodes at node_coverage={config.node_coverage} m "
-                f"(limit max_nodes={config.max_nodes}); is P in metres?")
-        edge_idx, edge_w = _edges(nodes, config.k_edges)
-        anchor_idx, anchor_w = _anchors(nodes, P, config)
-        R, t, losses, terms = optimise(P, Q, nodes, edge_idx, edge_w, anchor_idx, anchor_w, config)
-        warped = _warp_numpy(P, nodes, R, t, anchor_idx, anchor_w)
-        seconds = time.perf_counter() - start
-    finally:
-        torch.set_num_threads(old_threads)
+    start = time.perf_counter()
+    nodes = voxels.voxel_centroids(P, config.node_coverage)
+    if len(nodes) > config.max_nodes:
+        raise PointCloudError(
+            f"source cloud P gives {len(nodes)} graph nodes at node_coverage={config.node_coverage} m "
+            f"(limit max_nodes={config.max_nodes}); is P in metres?")
+    edge_idx, edge_w = _edges(nodes, config.k_edges)
+    anchor_idx, anchor_w = _anchors(nodes, P, config)
+    R, t, losses, terms = optimise(P, Q, nodes, edge_idx, edge_w, anchor_idx, anchor_w, config)
+    warped = _warp_numpy(P, nodes, R, t, anchor_idx, anchor_w)
+    seconds = time.perf_counter() - start
     return RegistrationResult(
         warped=warped, chamfer_before=float(chamfer_distance(P, Q)),
         chamfer_after=float(chamfer_distance(warped, Q)), iterations=len(losses), seconds=seconds,
@@ -788,95 +722,28 @@ def _register(P, Q, config, optimise) -> RegistrationResult:
 
 
 class _Adam:
-    """torch.optim.Adam's update (betas 0.9/0.999, eps 1e-8, no weight decay), written out.
-
-    Identical numbers; it avoids torch.optim, whose first use imports torch._dynamo (~1.3 s).
-    """
+    """torch.optim.Adam's update (betas 0.9/0.999, eps 1e-8, no weight decay) in place on numpy
+    arrays, same operations in the same order; torch fuses some multiply-adds, so the two differ by
+    rounding (~1e-15 after hundreds of steps). ``lr`` is scaled by the caller (ExponentialLR)."""
 
     def __init__(self, params, lr, betas=(0.9, 0.999), eps=1e-8):
         self.params, self.lr, self.betas, self.eps, self.steps = params, lr, betas, eps, 0
-        self.m = [torch.zeros_like(p) for p in params]
-        self.v = [torch.zeros_like(p) for p in params]
+        self.m = [np.zeros_like(p) for p in params]
+        self.v = [np.zeros_like(p) for p in params]
 
-    @torch.no_grad()
     def step(self, grads):
         b1, b2 = self.betas
         self.steps += 1
         bias1, bias2 = 1 - b1**self.steps, 1 - b2**self.steps
         for p, g, m, v in zip(self.params, grads, self.m, self.v):
-            m.lerp_(g, 1 - b1)
-            v.mul_(b2).addcmul_(g, g, value=1 - b2)
-            denom = (v.sqrt() / bias2**0.5).add_(self.eps)
-            p.addcdiv_(m, denom, value=-self.lr / bias1)
-
-
-def _torch_losses(P, Q, nodes, edge_idx, edge_w, anchor_idx, anchor_w, config: EDConfig):
-    """The reference losses in torch: returns ``losses(phi, t, sel_p, sel_q, sel_l) -> (total,
-    l_arap, l_cd, l_lap)`` (tensors; autograd gives the gradient). Used by
-    :func:`_optimise_autograd` and by the tests of the analytic gradient."""
-    dt = torch.float64
-    g = torch.as_tensor(nodes, dtype=dt)
-    Pt, Qt = torch.as_tensor(P, dtype=dt), torch.as_tensor(Q, dtype=dt)
-    a_idx, a_w = torch.as_tensor(anchor_idx), torch.as_tensor(anchor_w, dtype=dt)
-    e_idx, e_w = torch.as_tensor(edge_idx), torch.as_tensor(edge_w, dtype=dt)
-    g_ij = g[e_idx] - g[:, None, :]  # (M, k, 3) undeformed edge vectors
-
-    def losses(phi, t, sel_p, sel_q, sel_l):
-        def warp_subset(R, sel):
-            ai = a_idx[sel]
-            return _warp_torch(Pt[sel], g[ai], a_w[sel], R[ai], t[ai])
-
-        sel_p, sel_q, sel_l = (torch.as_tensor(s) for s in (sel_p, sel_q, sel_l))
-        R = axis_angle_to_matrix(phi)
-        if e_idx.shape[1]:
-            # |R_i(g_j-g_i) + g_i + t_i - (g_j + t_j)| written so that it is exactly 0 at identity
-            res = torch.einsum("mij,mkj->mki", R, g_ij) - g_ij + t[:, None, :] - t[e_idx]
-            l_arap = (e_w * (res**2).sum(-1)).mean()
-        else:
-            l_arap = t.sum() * 0.0
-        l_cd = _chamfer_sq_torch(warp_subset(R, sel_p), Qt[sel_q], config.chamfer_truncation)
-        if config.laplacian_in_gradient:
-            l_lap = _laplacian_torch(warp_subset(R, sel_l), config.laplacian_k)
-        else:  # reference quirk: @torch.no_grad(), the term only shifts the loss value
-            with torch.no_grad():
-                l_lap = _laplacian_torch(warp_subset(R, sel_l), config.laplacian_k)
-        total = config.w_arap * l_arap + config.w_chamfer * l_cd + config.w_laplacian * l_lap
-        return total, l_arap, l_cd, l_lap
-
-    return losses
-
-
-def _optimise_autograd(P, Q, nodes, edge_idx, edge_w, anchor_idx, anchor_w, config: EDConfig):
-    """The reference optimisation: losses in torch, gradient by autograd (the implementation before
-    the analytic gradient; 3-6 s per pair). Kept as the oracle of the tests and the benchmark."""
-    rng = np.random.default_rng(config.seed)
-    losses_of = _torch_losses(P, Q, nodes, edge_idx, edge_w, anchor_idx, anchor_w, config)
-    phi = torch.zeros((len(nodes), 3), dtype=torch.float64, requires_grad=True)
-    t = torch.zeros((len(nodes), 3), dtype=torch.float64, requires_grad=True)
-    adam = _Adam((phi, t), config.lr)
-    n_p, n_q = min(config.chamfer_samples, len(P)), min(config.chamfer_samples, len(Q))
-    losses, terms = [], []
-    for _ in range(config.iterations):
-        # fresh subsets each iteration (reference: torch.randperm, non-deterministic)
-        sel_p = rng.choice(len(P), n_p, replace=False)
-        sel_q = rng.choice(len(Q), n_q, replace=False)
-        sel_l = rng.choice(len(P), n_p, replace=False)
-        total, l_arap, l_cd, l_lap = losses_of(phi, t, sel_p, sel_q, sel_l)
-        losses.append(total.item())
-        terms.append((l_arap.item(), l_cd.item(), l_lap.item()))
-        if losses[-1] < config.stop_loss:
-            break
-        grads = torch.autograd.grad(total, (phi, t), allow_unused=True, materialize_grads=True)
-        adam.step(grads)
-        adam.lr *= config.lr_decay  # ExponentialLR, stepped every iteration
-    with torch.no_grad():
-        R = axis_angle_to_matrix(phi).numpy().copy()
-        t_out = t.detach().numpy().copy()
-    return R, t_out, np.asarray(losses), np.asarray(terms, dtype=np.float64).reshape(-1, 3)
+            m += (1 - b1) * (g - m)
+            v *= b2
+            v += (1 - b2) * g * g
+            p += (-self.lr / bias1) * m / (np.sqrt(v) / bias2**0.5 + self.eps)
 
 
 def _optimise(P, Q, nodes, edge_idx, edge_w, anchor_idx, anchor_w, config: EDConfig):
-    """The optimisation loop of :func:`_optimise_autograd` with the losses and their gradient from
+    """The optimisation loop of :func:`tpvp.registration.autograd_reference.optimise_autograd` with the losses and their gradient from
     the numba kernel :func:`_loss_and_gradient` (same random subsets, same Adam, same stop rule)."""
     rng = np.random.default_rng(config.seed)
     M = len(nodes)
@@ -886,35 +753,26 @@ def _optimise(P, Q, nodes, edge_idx, edge_w, anchor_idx, anchor_w, config: EDCon
     g_ij = nodes[e_idx] - nodes[:, None, :]  # (M, k, 3) undeformed edge vectors
     phi, t = np.zeros((M, 3)), np.zeros((M, 3))
     g_phi, g_t = np.zeros((M, 3)), np.zeros((M, 3))
-    # Adam (torch ops, identical to torch.optim) updates phi and t in place through shared memory
-    adam = _Adam((torch.from_numpy(phi), torch.from_numpy(t)), config.lr)
-    grads = (torch.from_numpy(g_phi), torch.from_numpy(g_t))
+    adam = _Adam((phi, t), config.lr)  # updates phi and t in place
     n_p, n_q = min(config.chamfer_samples, len(P)), min(config.chamfer_samples, len(Q))
     weights = (float(config.w_arap), float(config.w_chamfer), float(config.w_laplacian))
     losses, terms = [], []
-    # Adam's torch ops on one thread whatever config.threads says: with two, torch's OpenMP workers
-    # spin after each step and slow the numba kernel between the steps ~5x on a 2-core machine.
-    old_threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    try:
-        for _ in range(config.iterations):
-            # fresh subsets each iteration, drawn exactly as in _optimise_autograd
-            sel_p = rng.choice(len(P), n_p, replace=False)
-            sel_q = rng.choice(len(Q), n_q, replace=False)
-            sel_l = rng.choice(len(P), n_p, replace=False)
-            l_arap, l_cd, l_lap = _loss_and_gradient(
-                phi, t, P, Q, nodes, a_idx, a_w, e_idx, e_w, g_ij, sel_p, sel_q, sel_l, *weights,
-                bool(config.laplacian_in_gradient), int(config.laplacian_k), float(config.chamfer_truncation),
-                g_phi, g_t)
-            total = config.w_arap * l_arap + config.w_chamfer * l_cd + config.w_laplacian * l_lap
-            losses.append(total)
-            terms.append((l_arap, l_cd, l_lap))
-            if total < config.stop_loss:
-                break
-            adam.step(grads)
-            adam.lr *= config.lr_decay  # ExponentialLR, stepped every iteration
-    finally:
-        torch.set_num_threads(old_threads)
+    for _ in range(config.iterations):
+        # fresh subsets each iteration, drawn exactly as in the autograd reference
+        sel_p = rng.choice(len(P), n_p, replace=False)
+        sel_q = rng.choice(len(Q), n_q, replace=False)
+        sel_l = rng.choice(len(P), n_p, replace=False)
+        l_arap, l_cd, l_lap = _loss_and_gradient(
+            phi, t, P, Q, nodes, a_idx, a_w, e_idx, e_w, g_ij, sel_p, sel_q, sel_l, *weights,
+            bool(config.laplacian_in_gradient), int(config.laplacian_k), float(config.chamfer_truncation),
+            g_phi, g_t)
+        total = config.w_arap * l_arap + config.w_chamfer * l_cd + config.w_laplacian * l_lap
+        losses.append(total)
+        terms.append((l_arap, l_cd, l_lap))
+        if total < config.stop_loss:
+            break
+        adam.step((g_phi, g_t))
+        adam.lr *= config.lr_decay  # ExponentialLR, stepped every iteration
     R = np.empty((M, 3, 3))
     _rodrigues(phi, R, np.empty(M), np.empty(M))
     return R, t, np.asarray(losses, dtype=np.float64), np.asarray(terms, dtype=np.float64).reshape(-1, 3)

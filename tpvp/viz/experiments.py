@@ -127,15 +127,18 @@ def plot_frontier(path, frontier: pd.DataFrame, title: str = ""):
     for ax, (x, x_optimum, label) in zip(axes, (("views", "optimum_views", "views (initial and warm-up included)"),
                                                 ("path_length_m", "optimum_path_length_m", "path length (m)"))):
         ax.plot(frontier[x], 100 * frontier["coverage"], "o-", color="tab:red", label="Ours at a planning target")
-        for row in frontier.itertuples():
-            ax.annotate(f"{100 * row.target:g}", (getattr(row, x), 100 * row.coverage), fontsize=7,
-                        textcoords="offset points", xytext=(3, -9))
+        # targets that give the same plan share one label ("90-95"), so labels never overprint
+        for (x_value, coverage), group in frontier.groupby([x, "coverage"], sort=False):
+            targets = [f"{100 * t:g}" for t in group["target"]]
+            text = targets[0] if len(targets) == 1 else f"{targets[0]}-{targets[-1]}"
+            ax.annotate(text, (x_value, 100 * coverage), fontsize=7, textcoords="offset points", xytext=(4, -10))
         ax.plot(frontier[x_optimum], 100 * frontier["optimum_coverage"], "*--", color="black",
                 label="exact optimum (perfect knowledge)")
         ax.set_xlabel(label)
         ax.set_ylabel("true coverage of the oracle set (%)")
         ax.grid(alpha=0.3)
     axes[0].legend(fontsize=8, loc="lower right")
-    fig.suptitle(title or "Coverage-effort frontier (labels: planning target, %)")
+    fig.suptitle(f"{title}: coverage-effort frontier (labels: planning target, %)" if title
+                 else "Coverage-effort frontier (labels: planning target, %)")
     fig.tight_layout()
     return _save(fig, path)
