@@ -39,12 +39,16 @@ CALIBRATION_TARGETS = (0.95, 0.97, 0.98, 0.985, 0.99, 0.995, 1.0)
 EVALUATION_TARGETS = (0.95, 0.98, 0.99, 1.0)
 
 
-def _calibrate_case(case, targets) -> list[dict]:
+def _base_config(nbv_method):
+    return make_config("plant", {"nbv.method": nbv_method} if nbv_method else {})
+
+
+def _calibrate_case(case, targets, nbv_method=None) -> list[dict]:
     from tpvp.experiments.single_plant import build_scene, run_case, transfer
     from tpvp.jit import compile_kernels
 
     compile_kernels()
-    config = case.config(make_config("plant"))
+    config = case.config(_base_config(nbv_method))
     scene = build_scene(*case.instance.load(), config)
     shared = transfer(scene, config)
     rows = []
@@ -56,14 +60,14 @@ def _calibrate_case(case, targets) -> list[dict]:
     return rows
 
 
-def _evaluate_case(case, targets) -> list[dict]:
+def _evaluate_case(case, targets, nbv_method=None) -> list[dict]:
     from tpvp.experiments.frontier import coverage_frontier
     from tpvp.experiments.single_plant import build_scene, transfer
     from tpvp.jit import compile_kernels
     from tpvp.metrics import chamfer_distance
 
     compile_kernels()
-    config = case.config(make_config("plant"))
+    config = case.config(_base_config(nbv_method))
     scene = build_scene(*case.instance.load(), config)
     shared = transfer(scene, config)
     chamfer_mm = 1e3 * chamfer_distance(shared.alignment.warped, scene.current)
@@ -71,12 +75,13 @@ def _evaluate_case(case, targets) -> list[dict]:
     return [{**case.labels(), **row, "chamfer_truth_mm": chamfer_mm} for row in frontier.to_dict("records")]
 
 
-def _run(function, cases, targets, workers) -> pd.DataFrame:
+def _run(function, cases, targets, workers, nbv_method=None) -> pd.DataFrame:
     from tqdm.auto import tqdm
 
     rows = []
     with ProcessPoolExecutor(workers) as pool:
-        for case_rows in tqdm(pool.map(function, cases, [targets] * len(cases)), total=len(cases), unit="case"):
+        for case_rows in tqdm(pool.map(function, cases, [targets] * len(cases), [nbv_method] * len(cases)),
+                              total=len(cases), unit="case"):
             rows += case_rows
     return pd.DataFrame(rows)
 
@@ -117,6 +122,7 @@ def main() -> None:
     parser.add_argument("--view-spaces", nargs="+", default=list(plants.VIEW_SPACES))
     parser.add_argument("--rotations", nargs="+", type=float, default=list(plants.ROTATIONS))
     parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--nbv", default=None, help="warm-up NBV method (default: the paper configuration's)")
     parser.add_argument("--output", default=None, help="CSV of every (case, target) row")
     args = parser.parse_args()
     calibrate = args.mode == "calibrate"
@@ -127,10 +133,11 @@ def main() -> None:
         instances.append(plants.bundled_instance())
     cases = plants.case_list(instances, tuple(args.view_spaces), rotations=tuple(args.rotations))
     started = time.perf_counter()
-    raw = _run(_calibrate_case if calibrate else _evaluate_case, cases, targets, args.workers)
+    raw = _run(_calibrate_case if calibrate else _evaluate_case, cases, targets, args.workers, args.nbv)
     if args.output:
         raw.to_csv(args.output, index=False)
     print(f"{args.mode}: {len(cases)} cases x {len(targets)} targets, seeds {list(seeds)}, "
+          f"warm-up NBV {args.nbv or make_config('plant').nbv.method}, "
           f"{time.perf_counter() - started:.0f} s on {args.workers} workers")
     pd.set_option("display.width", 200)
     if calibrate:

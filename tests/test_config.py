@@ -93,3 +93,20 @@ def test_bad_files_and_overrides(tmp_path):
 def test_configs_are_frozen():
     with pytest.raises(dataclasses.FrozenInstanceError):
         PlantConfig().gt_resolution = 0.1
+
+
+def test_planning_target_from_the_asked_coverage():
+    """The asked true coverage maps to the planning surface through the calibrated miss ratio of the
+    view space (the smallest for other view spaces); 1.0 stays the full set cover."""
+    from tpvp.config import CALIBRATED_MISS_RATIO, SelectionConfig
+
+    asked = SelectionConfig(coverage_target=0.98)
+    for space, ratio in CALIBRATED_MISS_RATIO.items():
+        assert asked.planning_target(space) == pytest.approx(1 - ratio * 0.02)
+    assert asked.planning_target("tammes:40") == pytest.approx(1 - min(CALIBRATED_MISS_RATIO.values()) * 0.02)
+    assert SelectionConfig(coverage_target=0.98, planning_miss_ratio=1.0).planning_target("sphere") == pytest.approx(0.98)
+    assert SelectionConfig().planning_target("hemisphere") == 1.0
+    with pytest.raises(ConfigError, match="planning_miss_ratio"):
+        SelectionConfig(coverage_target=0.98, planning_miss_ratio=0.0)
+    with pytest.raises(ConfigError, match="above 0"):
+        SelectionConfig(coverage_target=0.5, planning_miss_ratio=3.0).planning_target("sphere")

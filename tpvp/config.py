@@ -109,10 +109,11 @@ class RegistrationConfig:
 
 # Share of a coverage target's allowance (1 - target) that the plan may leave uncovered on the
 # *predicted* planning surface, per view space: planning target = 1 - ratio x (1 - target).
-# Calibrated on generated pairs of seeds 10-12 (never the evaluation seeds 0-2) so that asking for
-# t gives a mean true coverage >= t with no case more than one point below (README, "Asking for a
-# coverage level"; benchmarks/coverage_target_calibration.py). Other view spaces take the smallest.
-CALIBRATED_MISS_RATIO = {"hemisphere": 1.0, "sphere": 0.5}
+# Calibrated on generated pairs of seeds 10-12 (never the evaluation seeds 0-2) for a 98 % request:
+# the largest ratio whose mean true coverage reaches it with no case more than one point below,
+# with either warm-up NBV (geometric or prior). Other view spaces take the smallest. README,
+# "Asking for a coverage level"; benchmarks/coverage_target_calibration.py.
+CALIBRATED_MISS_RATIO = {"hemisphere": 0.5, "sphere": 0.25}
 
 
 @dataclass(frozen=True)
