@@ -1,5 +1,6 @@
 """Execution path: local paths around the plant and the shortest open path through the views."""
 
+from tpvp.path.bound import BoundResult, open_path_lower_bound  # noqa: F401
 from tpvp.path.local import (  # noqa: F401
     local_path_length,
     local_path_lengths,

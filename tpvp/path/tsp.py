@@ -18,7 +18,8 @@ Distances may be asymmetric: all three methods use ``distance[i, j]`` as the cos
 to j (the local path lengths of :mod:`tpvp.path.local` are symmetric).
 
 ``band_path`` is the greenhouse-row variant (docs/greenhouse.md#band-path): views split into an
-upper and a lower height band, an open path in each, joined through a connection view.
+upper and a lower height band, an open path in each, joined through a connection view. Bands
+solved by the heuristic get a Held-Karp lower bound (:mod:`tpvp.path.bound`) and a reported gap.
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ import numpy as np
 from numba import njit
 
 from tpvp.errors import ConfigError
+from tpvp.path.bound import open_path_lower_bound
 from tpvp.solvers import check_solver_settings, milp_solver
 
 METHODS = ("auto", "dp", "ilp", "heuristic")
@@ -49,6 +51,7 @@ class TspConfig:
     time_limit: float = 60.0  # seconds for the ILP cutting loop (then the heuristic) or the heuristic
     threads: int = 1  # one thread keeps the result deterministic
     kicks: int = 50  # heuristic: random double-bridge restarts of the local search (fixed seed)
+    bound_iterations: int = 2000  # band_path: Held-Karp subgradient iterations for heuristic bands (0: no bound)
 
     def __post_init__(self):
         if self.method not in METHODS:
@@ -60,6 +63,9 @@ class TspConfig:
             raise ConfigError(f"ilp_max_nodes must be an integer >= 1, got {self.ilp_max_nodes!r}")
         if not (isinstance(self.kicks, (int, np.integer)) and self.kicks >= 0):
             raise ConfigError(f"kicks must be an integer >= 0, got {self.kicks!r}")
+        if isinstance(self.bound_iterations, (bool, np.bool_)) or not (
+                isinstance(self.bound_iterations, (int, np.integer)) and self.bound_iterations >= 0):
+            raise ConfigError(f"bound_iterations must be an integer >= 0, got {self.bound_iterations!r}")
 
 
 @dataclass(frozen=True, eq=False)
@@ -84,6 +90,15 @@ class BandPathResult:
     bands: tuple  # (first band's indices, second band's indices), each in visiting order
     connection_view: int  # first view of the second band (-1 when a band is empty)
     split_height: float
+    # Lower bounds (tpvp.path.bound, Held-Karp) for the same band split and band start views:
+    # per band (in ``bands`` order; a band solved exactly has bound = its length, an empty one 0)
+    # and overall (band bounds + the start and connection legs). Gaps are (length - bound) / length;
+    # NaN when bound_iterations = 0 left a heuristic band without a bound.
+    band_lengths: tuple = ()  # each band's open-path length (legs excluded)
+    band_bounds: tuple = ()
+    band_gaps: tuple = ()
+    bound: float = float("nan")
+    gap: float = float("nan")
 
 
 # --- input checks ----------------------------------------------------------------------------
@@ -480,7 +495,9 @@ def band_path(positions, split_height: float | None = None, start_position=None,
         bands = [bands[1], bands[0]]
 
     optimal = True
-    length = 0.0
+    legs = 0.0
+    band_lengths = [0.0, 0.0]
+    band_bounds = [0.0, 0.0]
     visited = []
     entry_pt = start_pt
     connection = -1
@@ -497,19 +514,38 @@ def band_path(positions, split_height: float | None = None, start_position=None,
         else:
             if b == 0:
                 first_view = int(np.argmin(np.linalg.norm(pos[members] - entry_pt, axis=1)))
-                length += float(np.linalg.norm(pos[members[first_view]] - entry_pt))
+                legs += float(np.linalg.norm(pos[members[first_view]] - entry_pt))
             else:
                 # Connection view: the band's view nearest the end of the previous band's path.
                 first_view = int(np.argmin(d[visited[-1], members]))
                 connection = int(members[first_view])
-                length += float(d[visited[-1], connection])
+                legs += float(d[visited[-1], connection])
             res = shortest_open_path(sub, first_view, config=config)
             local = res.order
         optimal &= res.optimal
-        length += res.length
+        band_lengths[b] = res.length
+        if res.optimal:
+            band_bounds[b] = res.length
+        elif config.bound_iterations > 0:
+            problem, root = (aug, 0) if (b == 0 and entry_pt is None) else (sub, first_view)
+            band_bounds[b] = open_path_lower_bound(problem, root, iterations=int(config.bound_iterations),
+                                                   upper=res.length).bound
+        else:
+            band_bounds[b] = float("nan")
         visited.extend(members[local].tolist())
+    length = legs + sum(band_lengths)
+    bound = legs + sum(band_bounds)
+
+    def rel_gap(total, lower):
+        if np.isnan(lower):
+            return float("nan")
+        return 0.0 if total <= 0 else max(0.0, (total - lower) / total)
+
     order = np.asarray(visited, dtype=np.int64)
     split_bands = tuple(order[np.isin(order, m)] for m in bands)
     return BandPathResult(order=order, length=float(length), optimal=bool(optimal),
                           solve_seconds=time.perf_counter() - t0, bands=split_bands,
-                          connection_view=connection, split_height=split)
+                          connection_view=connection, split_height=split,
+                          band_lengths=tuple(band_lengths), band_bounds=tuple(band_bounds),
+                          band_gaps=tuple(rel_gap(t, lo) for t, lo in zip(band_lengths, band_bounds)),
+                          bound=float(bound), gap=rel_gap(length, bound))
