@@ -103,3 +103,17 @@ def test_band_path_reports_bounds_and_gaps():
     # No bound requested: heuristic bands report NaN.
     nob = band_path(pos, config=TspConfig(kicks=5, bound_iterations=0))
     assert np.isnan(nob.gap) and all(np.isnan(g) for g in nob.band_gaps)
+
+
+def test_band_path_improves_a_weak_path_to_the_gap_target():
+    """A deliberately weak first heuristic (no perturbations) is improved until every band's gap to
+    its bound is below band_gap; the reported lengths are those of the returned order."""
+    rng = np.random.default_rng(3)
+    pos = rng.uniform([0, -1.3, 0.3], [10, -0.8, 2.0], size=(240, 3))
+    weak = band_path(pos, split_height=1.15, config=TspConfig(kicks=0, band_gap=1.0))
+    better = band_path(pos, split_height=1.15, config=TspConfig(kicks=10, band_gap=0.008, band_seconds=30.0))
+    assert max(better.band_gaps) <= 0.008 < max(weak.band_gaps)
+    assert better.length < weak.length
+    assert sorted(better.order) == list(range(len(pos)))
+    d = np.linalg.norm(pos[:, None] - pos[None], axis=2)
+    assert better.length == pytest.approx(float(d[better.order[:-1], better.order[1:]].sum()))

@@ -52,6 +52,8 @@ class TspConfig:
     threads: int = 1  # one thread keeps the result deterministic
     kicks: int = 50  # heuristic: random double-bridge restarts of the local search (fixed seed)
     bound_iterations: int = 2000  # band_path: Held-Karp subgradient iterations for heuristic bands (0: no bound)
+    band_gap: float = 0.02  # band_path: keep improving a heuristic band's path until its gap to the bound is below
+    band_seconds: float = 5.0  # band_path: ... or this many seconds have gone into the band
 
     def __post_init__(self):
         if self.method not in METHODS:
@@ -63,6 +65,10 @@ class TspConfig:
             raise ConfigError(f"ilp_max_nodes must be an integer >= 1, got {self.ilp_max_nodes!r}")
         if not (isinstance(self.kicks, (int, np.integer)) and self.kicks >= 0):
             raise ConfigError(f"kicks must be an integer >= 0, got {self.kicks!r}")
+        for name in ("band_gap", "band_seconds"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not (isinstance(value, (int, float)) and value >= 0):
+                raise ConfigError(f"{name} must be a number >= 0, got {value!r}")
         if isinstance(self.bound_iterations, (bool, np.bool_)) or not (
                 isinstance(self.bound_iterations, (int, np.integer)) and self.bound_iterations >= 0):
             raise ConfigError(f"bound_iterations must be an integer >= 0, got {self.bound_iterations!r}")
@@ -386,16 +392,17 @@ def _local_search(d: np.ndarray, a: np.ndarray, free_end: bool) -> np.ndarray:
 
 
 def _iterated_local_search(d: np.ndarray, start: int, end: int | None, kicks: int,
-                           deadline: float) -> np.ndarray:
-    """Nearest neighbour, local search, then ``kicks`` double-bridge perturbations (kept if better)."""
+                           deadline: float, initial: np.ndarray | None = None, seed: int = 0) -> np.ndarray:
+    """Nearest neighbour (or ``initial``), local search, then ``kicks`` double-bridge perturbations
+    (kept if better)."""
     free_end = end is None
-    best = _local_search(d, _nearest_neighbour(d, start, end), free_end)
+    best = _local_search(d, _nearest_neighbour(d, start, end) if initial is None else initial, free_end)
     best_len = path_length(d, best)
     n = best.size
     last_movable = n - 1 if free_end else n - 2
     if last_movable < 4:
         return best
-    rng = np.random.default_rng(0)  # fixed seed: the heuristic is deterministic
+    rng = np.random.default_rng(seed)  # fixed seed: the heuristic is deterministic
     for _ in range(kicks):
         if time.perf_counter() >= deadline:
             break
@@ -530,6 +537,17 @@ def band_path(positions, split_height: float | None = None, start_position=None,
             problem, root = (aug, 0) if (b == 0 and entry_pt is None) else (sub, first_view)
             band_bounds[b] = open_path_lower_bound(problem, root, iterations=int(config.bound_iterations),
                                                    upper=res.length).bound
+            # More perturbation rounds from the best path while the gap is above the target and the
+            # band's time lasts (each round a new fixed seed: still deterministic given the budget).
+            order, rounds = res.order, 0
+            band_deadline = time.perf_counter() + float(config.band_seconds) - res.solve_seconds
+            while (path_length(problem, order) - band_bounds[b] > config.band_gap * path_length(problem, order)
+                   and time.perf_counter() < band_deadline):
+                rounds += 1
+                order = _iterated_local_search(problem, root, None, int(config.kicks), band_deadline,
+                                               initial=order, seed=rounds)
+            band_lengths[b] = path_length(problem, order)
+            local = order[1:] - 1 if (b == 0 and entry_pt is None) else order
         else:
             band_bounds[b] = float("nan")
         visited.extend(members[local].tolist())
