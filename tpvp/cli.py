@@ -72,10 +72,11 @@ def _run_pair(previous, current, output, config, name="case", inputs=(), names=N
     from tqdm.auto import tqdm
 
     from tpvp.experiments.outputs import write_case_outputs
-    from tpvp.experiments.single_plant import build_scene, run_case
+    from tpvp.experiments.single_plant import build_scene, run_case, transfer
     from tpvp.io.publish import staged_folder
     from tpvp.jit import compile_kernels
 
+    frontier_table = None
     with staged_folder(output, inputs=inputs) as stage, \
             tqdm(total=len(STAGES), desc="tpvp", unit="stage", leave=False, disable=None) as bar:
         def step(stage_name):
@@ -86,7 +87,8 @@ def _run_pair(previous, current, output, config, name="case", inputs=(), names=N
         compile_seconds = compile_kernels()
         step("scene")
         scene = build_scene(previous, current, config, **({"names": names} if names else {}))
-        result = run_case(scene, config, progress=step)
+        shared = transfer(scene, config, progress=step)  # warm-up + registration, reused by the frontier
+        result = run_case(scene, config, progress=step, transferred=shared)
         step("outputs")
         written = write_case_outputs(stage.folder, scene, result, config, name,
                                      extra_summary={"seconds_compile": compile_seconds})
@@ -96,10 +98,11 @@ def _run_pair(previous, current, output, config, name="case", inputs=(), names=N
             from tpvp.experiments.frontier import coverage_frontier, write_frontier_files
 
             bar.set_postfix_str("frontier")
-            frontier = write_frontier_files(stage.folder, coverage_frontier(scene, config), name)["table"]
+            frontier_table = coverage_frontier(scene, config, transferred=shared)
+            write_frontier_files(stage.folder, frontier_table, name)
     _print_case(result, summary, stage.destination, compile_seconds)
-    if frontier is not False:
-        _print_frontier(frontier)
+    if frontier_table is not None:
+        _print_frontier(frontier_table)
         print("  (also frontier.csv, frontier.png)")
     reduction = scene.reduction
     for which in ("previous", "current"):

@@ -389,24 +389,26 @@ def _grid_knn(ref, queries, k, out_idx, out_d2):
             r += 1
 
 
+@njit(cache=True, error_model="numpy", inline="always")
+def _rodrigues_coefficients(theta2):
+    """``(a, b, a', b')``: R = I + a K + b K^2 for theta^2 = |phi|^2, and d(a, b)/d theta^2 (series
+    below 1e-8, where the closed forms lose precision)."""
+    if theta2 < 1e-8:
+        return (1.0 - theta2 / 6.0 + theta2**2 / 120.0, 0.5 - theta2 / 24.0 + theta2**2 / 720.0,
+                -1.0 / 6.0 + 2.0 * theta2 / 120.0, -1.0 / 24.0 + 2.0 * theta2 / 720.0)
+    th = np.sqrt(theta2)
+    s, c = np.sin(th), np.cos(th)
+    return (s / th, (1.0 - c) / th**2, (c / th - s / th**2) / (2.0 * th),
+            (s / th**2 - 2.0 * (1.0 - c) / th**3) / (2.0 * th))
+
+
 @njit(**_JIT)
 def _rodrigues(phi, R, da, db):
-    """R = I + a [phi]x + b [phi]x^2 (as :func:`axis_angle_to_matrix`) and a', b' = d(a, b)/d theta^2."""
+    """R = I + a [phi]x + b [phi]x^2 (as the torch reference's ``axis_angle_to_matrix``) and
+    a', b' = d(a, b)/d theta^2."""
     for m in range(phi.shape[0]):
         x, y, z = phi[m, 0], phi[m, 1], phi[m, 2]
-        theta2 = x * x + y * y + z * z
-        if theta2 < 1e-8:
-            a = 1.0 - theta2 / 6.0 + theta2**2 / 120.0
-            b = 0.5 - theta2 / 24.0 + theta2**2 / 720.0
-            da[m] = -1.0 / 6.0 + 2.0 * theta2 / 120.0
-            db[m] = -1.0 / 24.0 + 2.0 * theta2 / 720.0
-        else:
-            th = np.sqrt(theta2)
-            s, c = np.sin(th), np.cos(th)
-            a = s / th
-            b = (1.0 - c) / th**2
-            da[m] = (c / th - s / th**2) / (2.0 * th)
-            db[m] = (s / th**2 - 2.0 * (1.0 - c) / th**3) / (2.0 * th)
+        a, b, da[m], db[m] = _rodrigues_coefficients(x * x + y * y + z * z)
         # K = [[0, -z, y], [z, 0, -x], [-y, x, 0]]; K @ K = phi phi^T - theta2 I
         R[m, 0, 0] = 1.0 + b * (-(y * y) - z * z)
         R[m, 0, 1] = a * -z + b * (x * y)
@@ -429,14 +431,7 @@ def _rodrigues_backward(phi, gR, da, db, g_phi):
     K = np.empty((3, 3))
     for m in range(phi.shape[0]):
         x, y, z = phi[m, 0], phi[m, 1], phi[m, 2]
-        theta2 = x * x + y * y + z * z
-        if theta2 < 1e-8:
-            a = 1.0 - theta2 / 6.0 + theta2**2 / 120.0
-            b = 0.5 - theta2 / 24.0 + theta2**2 / 720.0
-        else:
-            th = np.sqrt(theta2)
-            a = np.sin(th) / th
-            b = (1.0 - np.cos(th)) / th**2
+        a, b, _, _ = _rodrigues_coefficients(x * x + y * y + z * z)
         K[0, 0], K[0, 1], K[0, 2] = 0.0, -z, y
         K[1, 0], K[1, 1], K[1, 2] = z, 0.0, -x
         K[2, 0], K[2, 1], K[2, 2] = -y, x, 0.0
