@@ -6,7 +6,7 @@ import pytest
 from tpvp.cli import main
 from tpvp.config import make_config
 from tpvp.errors import ConfigError, InputFileError
-from tpvp.experiments import plants
+from tpvp.experiments import plants, runner
 
 CONFIG = make_config("plant", {"registration.embedded_deformation.iterations": 20})
 
@@ -153,7 +153,7 @@ def test_a_prepared_dataset_becomes_instances(tmp_path):
 def test_the_same_rows_on_a_dask_cluster(tiny_cases, tmp_path, monkeypatch):
     from distributed import Client, LocalCluster
 
-    monkeypatch.setattr(plants, "SCHEDULER_TIMEOUT_S", 2)
+    monkeypatch.setattr(runner, "SCHEDULER_TIMEOUT_S", 2)
     methods = ["one-shot-no-prior", "ma-scvp"]
     local = plants.run_experiments(tiny_cases, methods, CONFIG, cache_dir=tmp_path / "local", progress=False)
     with LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None) as cluster:

@@ -194,6 +194,120 @@ def _experiments_plants(args) -> int:
     return 0
 
 
+def _row_config(args):
+    from tpvp.config import load_config, parse_overrides
+
+    overrides = {"view_space": args.room}
+    if args.cover_resolution is not None:
+        overrides["selection.cover_resolution"] = args.cover_resolution
+    if args.coverage_target is not None:
+        overrides["selection.coverage_target"] = args.coverage_target
+    if args.quick:
+        overrides["gt_resolution"] = 0.02
+    overrides.update(parse_overrides(args.set))
+    config = load_config(args.config, overrides)
+    if config.setting != "row":
+        raise TpvpError(f"configuration {config.name!r} is for individual plants; use paper-row or a row YAML file")
+    return config
+
+
+def _greenhouse(args) -> int:
+    from tqdm.auto import tqdm
+
+    from tpvp.experiments.greenhouse import build_row_scene, run_row_case
+    from tpvp.experiments.outputs import write_row_case_outputs
+    from tpvp.experiments.rows import RowCase, dataset_cases
+    from tpvp.io.publish import staged_folder
+
+    config = _row_config(args)
+    if args.dataset is not None:
+        cases = [c for c in dataset_cases(args.dataset) if c.room == args.room]
+        if not cases:
+            raise TpvpError(f"{args.dataset}: no two sessions of {args.room} to pair")
+        if not 0 <= args.pair < len(cases):
+            raise TpvpError(f"--pair {args.pair}: {args.dataset} has pairs 0..{len(cases) - 1} of {args.room}")
+        case = cases[args.pair]
+    else:
+        if not 0 <= args.pair <= 3:
+            raise TpvpError(f"--pair {args.pair}: a generated row has sessions 0..4, pairs 0..3")
+        case = RowCase(args.room, args.pair, args.seed)
+    print(f"{case.name}: configuration {config.name!r}, covering voxel {100 * config.selection.cover_resolution:g} cm, "
+          f"ground truth {100 * config.gt_resolution:g} cm")
+    stages = ["scene and oracle", "registration", "inflation", "look-at targets", "visibility", "view selection",
+              "path", "execution", "outputs"]
+    inputs = case.files
+    with staged_folder(args.output, inputs=inputs) as stage, \
+            tqdm(total=len(stages), desc="tpvp greenhouse", unit="stage", leave=False, disable=None) as bar:
+        def step(stage_name):
+            bar.update(1)
+            bar.set_postfix_str(stage_name)
+
+        bar.set_postfix_str(stages[0])
+        previous, current = case.load()
+        scene = build_row_scene(previous, current, config, room=case.room, names=(f"{case.name} (previous)",
+                                                                                   f"{case.name} (current)"),
+                                cache_dir=args.cache)
+        result = run_row_case(scene, config, progress=step)
+        step("outputs")
+        write_row_case_outputs(stage.folder, scene, result, config, case.name)
+    rows = [("views (15 passive included)", f"{result.n_views}"),
+            ("coverage of the oracle set", f"{100 * result.coverage:.2f} % (passive sweep alone "
+                                           f"{100 * result.coverage_passive:.2f} %)"),
+            ("path length", f"{result.path_length:.2f} m (passive sweep {scene.room.passive_cost:.2f} m included; "
+                            f"band path gap to its lower bound {100 * result.path.gap:.2f} %)"),
+            ("Chamfer transferred vs coarse", f"{1e3 * result.transfer.alignment.chamfer_before:.2f} -> "
+                                              f"{1e3 * result.transfer.alignment.chamfer_after:.2f} mm"),
+            ("view selection", f"{len(result.selected)} of {len(result.candidates)} candidates, "
+                               f"optimal={result.selection.optimal}"),
+            ("time: oracle", f"{scene.timings['oracle']:.1f} s" + (" (from the cache)" if scene.oracle_cached else "")),
+            ("time: registration / planning", f"{result.timings['registration']:.2f} s / {result.timings['planning']:.2f} s")]
+    width = max(len(k) for k, _ in rows)
+    for key, value in rows:
+        print(f"  {key:<{width}}  {value}")
+    print(f"wrote {stage.destination}/ (results.json/.csv, plan.csv, plan.json, config.yaml, provenance.json, "
+          f"plan.png, recording.rrd)")
+    for warning in result.warnings:
+        print(f"warning: {warning}", file=sys.stderr)
+    return 0
+
+
+def _experiments_rows(args) -> int:
+    from tpvp.experiments import rows
+
+    config = _row_config(args)
+    cases = rows.default_row_cases(args.quick, args.dataset, tuple(args.rooms))
+    settings = rows.quick_settings() if args.quick else rows.RowSettings()
+    methods = args.methods or list(rows.ALL_METHODS)
+    where = f"the Dask cluster {args.scheduler}" if args.scheduler else f"{args.workers} local worker(s)"
+    print(f"{len(cases)} cases x {len(methods)} methods on {where}; cache {args.cache}")
+    raw = rows.run_row_experiments(cases, methods, config, settings, cache_dir=args.cache, workers=args.workers,
+                                   scheduler=args.scheduler)
+    written = rows.write_results(args.output, raw, config, settings)
+    from tpvp.experiments.plants import markdown
+
+    print(markdown(written["table6_coverage_effort"]))
+    print(f"wrote {Path(args.output).absolute()}/ (raw_cases.csv, {', '.join(f'{n}.csv/.md' for n in written)}, "
+          f"paper_values.csv, figures/)")
+    return 0
+
+
+def _row_options(p, output):
+    p.add_argument("--output", default=output, help="output folder (default: %(default)s)")
+    p.add_argument("--config", default="paper-row", metavar="NAME|FILE",
+                   help="named configuration (paper-row) or a YAML file (default: %(default)s)")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="override one configuration key (repeatable; `tpvp config --config paper-row --derived`)")
+    p.add_argument("--dataset", type=Path, default=None,
+                   help="a folder written by `python -m data_tools greenhouse clean` (Processed_3D_Model/"
+                        "<room>_<date>.pcd; default: generated rows, offline)")
+    p.add_argument("--cover-resolution", type=float, default=None, metavar="M",
+                   help="covering voxel of the set cover (paper: 0.10, 0.05, 0.04, 0.03; default: the "
+                        "configuration's, 0.04)")
+    p.add_argument("--coverage-target", type=float, default=None, metavar="FRACTION",
+                   help="fraction of the planning surface to see (exact partial set cover; default 1.0)")
+    p.add_argument("--quick", action="store_true", help="coarse ground truth (2 cm) for a fast look")
+
+
 def _view_space_arg(value: str) -> str:
     from tpvp.viewspace import get_view_space
 
@@ -295,6 +409,27 @@ def build_parser() -> argparse.ArgumentParser:
     plant.add_argument("--cache", default="outputs/cache/plants",
                        help="cache folder of per-task rows; an interrupted run resumes (default: %(default)s)")
     plant.set_defaults(func=_experiments_plants)
+    rows = which.add_parser("rows", help="greenhouse rows: Tables V-VI (Ours, random prior ladder, upper limits)")
+    _row_options(rows, "outputs/experiments/rows")
+    rows.add_argument("--rooms", nargs="+", default=["room1", "room4"], help="(default: %(default)s)")
+    rows.add_argument("--methods", nargs="+", default=None,
+                      help="methods to run (default: coarse, ours, prior-obb-random, prior-passive-random, "
+                           "prior-transfer-random, upper-limit)")
+    rows.add_argument("--workers", type=int, default=2, help="parallel processes (default: %(default)s)")
+    rows.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                      help="run the tasks on a Dask cluster, e.g. tcp://10.0.0.5:8786 (default: local processes)")
+    rows.add_argument("--cache", default="outputs/cache/rows",
+                      help="cache folder of per-task rows and the oracles (default: %(default)s)")
+    rows.set_defaults(func=_experiments_rows)
+    green = sub.add_parser("greenhouse", help="plan and execute one greenhouse-row pair (generated by default)")
+    _row_options(green, "outputs/greenhouse")
+    green.add_argument("--room", default="room1", choices=["room1", "room4"], help="(default: %(default)s)")
+    green.add_argument("--pair", type=int, default=0,
+                       help="which consecutive pair: sessions K -> K+1 (default: %(default)s)")
+    green.add_argument("--seed", type=int, default=0, help="seed of the generated row (default: %(default)s)")
+    green.add_argument("--cache", default=None,
+                       help="folder of cached oracles (default: $TPVP_CACHE_DIR or ~/.cache/tpvp)")
+    green.set_defaults(func=_greenhouse)
     show = sub.add_parser("config", help="print the resolved configuration as YAML (save it, edit it, pass it "
                                          "back with --config)")
     common(show, None)

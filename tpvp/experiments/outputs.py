@@ -97,3 +97,45 @@ def write_case_outputs(folder, scene, result, config, name: str = "case", extra_
     return {"results": folder / "results.json", "plan": plans["scan"], "plan_normalised": plans["normalised"],
             "plan_json": plans["json"], "config": folder / "config.yaml", "provenance": folder / "provenance.json",
             "figures": [plan_png, coverage_png], "recording": rrd}
+
+
+def write_row_case_outputs(folder, scene, result, config, name: str = "row case", extra_summary: dict | None = None) -> dict:
+    """What one greenhouse-row run leaves: results (JSON + CSV), the plan (passive sweep then the
+    planned views, world frame), ``config.yaml`` + ``provenance.json``, the path from the top and
+    the side, and a rerun ``.rrd``."""
+    from tpvp.viz.rows import plot_row_paths
+
+    folder = Path(folder)
+    room = scene.room
+    positions = np.concatenate([room.initial_positions, result.positions])
+    look_ats = np.concatenate([room.initial_look_ats, result.look_ats])
+    roles = ["passive"] * len(room.initial_positions) + ["planned"] * len(result.selected)
+    quaternions = np.array([rotation_to_quaternion(r) for r in look_at_rotations(positions, look_ats)]).reshape(-1, 4)
+    table = plan_table(positions, look_ats, quaternions, roles)
+    table.insert(1, "candidate_position", [-1] * len(room.initial_positions)
+                 + result.candidates.position_ids[result.selected].tolist())
+    plans = write_plan(folder, {"world": table}, {"world": f"{room.room} world frame (the room's boxes; metres)"})
+    summary = {"name": name, "configuration": config.name, "room": room.room,
+               "cover_resolution_m": config.selection.cover_resolution, "oracle_voxels": int(len(scene.oracle)),
+               "oracle_from_cache": scene.oracle_cached, **result.summary(), **(extra_summary or {})}
+    atomic_write_text(folder / "results.json", json.dumps(summary, indent=2, default=float) + "\n")
+    atomic_write_text(folder / "results.csv", pd.DataFrame([summary]).to_csv(index=False))
+    atomic_write_text(folder / "config.yaml", config_yaml(config, "resolved configuration of this run; "
+                                                          "re-run with: tpvp greenhouse --config config.yaml"))
+    atomic_write_text(folder / "provenance.json", json.dumps(provenance(config, {"seed": config.seed}), indent=2) + "\n")
+    plan_png = plot_row_paths(folder / "plan.png", room.plant_box, scene.current,
+                              {"Ours": (result.positions, f"{result.n_views} views (15 passive), "
+                                        f"{100 * result.coverage:.2f} % coverage, {result.path_length:.1f} m")},
+                              f"{name}: planned path (plant-box frame)")
+    transfer = result.transfer
+    rrd = write_recording(
+        folder / "recording.rrd",
+        clouds={"current_truth": (scene.current, (120, 120, 120)), "previous": (scene.previous, (220, 60, 60)),
+                "coarse": (transfer.coarse, (40, 90, 220)), "transferred": (transfer.alignment.warped, (230, 140, 30)),
+                "inflation": (transfer.inflation.inflation, (40, 180, 60))},
+        cameras={"passive_views": (room.initial_positions, room.initial_look_ats),
+                 "planned_views": (result.positions, result.look_ats)},
+        paths={"band_path": np.concatenate([room.initial_positions[-1:], result.positions])})
+    return {"results": folder / "results.json", "plan": plans["world"], "plan_json": plans["json"],
+            "config": folder / "config.yaml", "provenance": folder / "provenance.json", "figures": [plan_png],
+            "recording": rrd}

@@ -15,10 +15,8 @@ import hashlib
 import json
 import re
 import time
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import asdict, dataclass, replace
 from functools import lru_cache
-from multiprocessing import get_context
 from pathlib import Path
 
 import numpy as np
@@ -27,6 +25,7 @@ import pandas as pd
 from tpvp import __version__
 from tpvp.config import PlantConfig, make_config, to_dict
 from tpvp.errors import ConfigError, InputFileError
+from tpvp.experiments.runner import cached_table, code_fingerprint, run_cases  # noqa: F401 (code_fingerprint re-exported)
 from tpvp.registry import Registry
 
 SPECIES = ("tomato", "maize")
@@ -35,7 +34,6 @@ ROTATIONS = (0.0, 45.0)
 INITIAL_VIEWS = (17, 8, 21)
 VIEW_SPACES = ("hemisphere", "sphere")
 GMC_BUDGETS = (5, 10, 15, 20)
-SCHEDULER_TIMEOUT_S = 30  # connecting to a Dask scheduler
 PAPER_TABLE = Path(__file__).resolve().parent.parent / "data" / "paper" / "individual_plant.csv"
 
 PLANT_METHODS = Registry("plant experiment method")
@@ -276,17 +274,6 @@ def ma_scvp(scene, config):
 # --------------------------------------------------------------------------------------------------
 
 
-@lru_cache(maxsize=1)
-def code_fingerprint() -> str:
-    """A hash of the package's source files: a code change without a version change must not
-    reuse cached rows either."""
-    digest = hashlib.sha256()
-    root = Path(__file__).resolve().parent.parent
-    for path in sorted(root.rglob("*.py")):
-        digest.update(str(path.relative_to(root)).encode() + b"\0" + path.read_bytes())
-    return digest.hexdigest()[:16]
-
-
 def task_key(case: Case, method: str, config: PlantConfig) -> str:
     payload = {"case": asdict(case), "method": method, "config": to_dict(case.config(config)), "version": __version__,
                "code": code_fingerprint()}
@@ -305,24 +292,18 @@ def _scene(case_without_view: Case, config: PlantConfig):
 def run_task(case: Case, method: str, config: PlantConfig, cache_dir=None) -> pd.DataFrame:
     """The rows of one (case, method), from the cache when present; written to it otherwise."""
     path = Path(cache_dir) / f"{task_key(case, method, config)}.parquet" if cache_dir else None
-    if path is not None and path.is_file():
-        try:
-            return pd.read_parquet(path)
-        except (OSError, ValueError):
-            pass  # a damaged cache entry is recomputed (and replaced atomically)
     function = PLANT_METHODS.get(method)
-    case_config = case.config(config)
-    t0 = time.perf_counter()
-    # The scene depends on the pair, view space and rotation only: shared by initial views and methods.
-    scene = _scene(replace(case, initial_view=0), replace(case_config, initial_view=0))
-    rows = function(scene, case_config)
-    seconds = time.perf_counter() - t0
-    table = pd.DataFrame([{**case.labels(), "method": method, **row, "seconds_task": seconds} for row in rows])
-    if path is not None:
-        from tpvp.io import atomic_write_bytes
 
-        atomic_write_bytes(path, table.to_parquet(index=False))
-    return table
+    def compute():
+        case_config = case.config(config)
+        t0 = time.perf_counter()
+        # The scene depends on the pair, view space and rotation only: shared by initial views and methods.
+        scene = _scene(replace(case, initial_view=0), replace(case_config, initial_view=0))
+        rows = function(scene, case_config)
+        seconds = time.perf_counter() - t0
+        return pd.DataFrame([{**case.labels(), "method": method, **row, "seconds_task": seconds} for row in rows])
+
+    return cached_table(path, compute)
 
 
 def run_case_tasks(case: Case, methods, config: PlantConfig, cache_dir=None) -> list:
@@ -344,58 +325,12 @@ def run_experiments(cases, methods, config: PlantConfig | None = None, cache_dir
     cases = list(cases)
     if not cases or not methods:
         raise ConfigError("no task: the case list or the method list is empty")
-    from tqdm.auto import tqdm
-
-    tables = []
-    client, own = _connect(scheduler) if scheduler is not None else (None, False)
-    bar = tqdm(total=len(cases) * len(methods), desc="plant experiments", unit="task", disable=not progress)
-
-    def collect(case_tables):
-        tables.extend(case_tables)
-        bar.update(len(case_tables))
-
-    if client is not None:
-        try:
-            _run_on_cluster(cases, methods, config, cache_dir, client, collect)
-        finally:
-            if own:
-                client.close()
-    elif workers <= 1:
-        for case in cases:
-            collect(run_case_tasks(case, methods, config, cache_dir))
-    else:
-        with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("forkserver")) as pool:
-            futures = [pool.submit(run_case_tasks, case, methods, config, cache_dir) for case in cases]
-            for future in as_completed(futures):
-                collect(future.result())
-    bar.close()
+    tables = run_cases(run_case_tasks, cases, (methods, config, cache_dir), len(methods), workers=workers,
+                       scheduler=scheduler, progress=progress, desc="plant experiments")
     raw = pd.concat(tables, ignore_index=True)
     order = {m: i for i, m in enumerate(methods)}
     return raw.sort_values(["view_space", "instance", "rotation_deg", "initial_view", "method"],
                            key=lambda c: c.map(order) if c.name == "method" else c, kind="stable").reset_index(drop=True)
-
-
-def _connect(scheduler):
-    """``(client, whether we opened it)`` for a Dask scheduler address or an existing Client."""
-    try:
-        from distributed import Client
-    except ImportError:
-        raise ConfigError("--scheduler needs the package 'distributed' (pip install distributed)") from None
-    if isinstance(scheduler, Client):
-        return scheduler, False
-    try:
-        return Client(scheduler, timeout=SCHEDULER_TIMEOUT_S), True
-    except (OSError, TimeoutError) as exc:
-        raise ConfigError(f"cannot reach the Dask scheduler {scheduler!r}: {exc}") from None
-
-
-def _run_on_cluster(cases, methods, config, cache_dir, client, collect) -> None:
-    """The cases on a dask.distributed cluster (we write no scheduler: Dask's runs them)."""
-    from distributed import as_completed as completed
-
-    futures = [client.submit(run_case_tasks, case, methods, config, cache_dir, pure=False) for case in cases]
-    for future in completed(futures):
-        collect(future.result())
 
 
 # --------------------------------------------------------------------------------------------------

@@ -1,0 +1,208 @@
+"""Greenhouse rows end to end: look-at targets and round robin, the cached oracle, one case of
+Ours and its baselines, the row experiment runner, the CLI and its bad inputs."""
+
+from __future__ import annotations
+
+import itertools
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from tpvp.cli import main
+from tpvp.errors import ConfigError, InputFileError, PointCloudError
+from tpvp.experiments import greenhouse, rows
+from tpvp.synthetic.greenhouse import generate_row
+from tpvp.viewspace.lookat import (farthest_point_sampling, free_space_keys, round_robin_views,
+                                   surface_frontiers)
+
+QUICK = rows.quick_config({"registration.method": "none"})
+
+
+# ----------------------------------------------------------------------------- look-at candidates
+
+
+def _brute_round_robin(targets, positions, rounds, seed):
+    rng = np.random.default_rng(seed)
+    used, pairs = set(), []
+    for _ in range(rounds):
+        for t in rng.permutation(len(targets)):
+            if len(used) == len(positions):
+                break
+            d = [(np.sum((targets[t] - p) ** 2), i) for i, p in enumerate(positions) if i not in used]
+            i = min(d)[1]
+            used.add(i)
+            pairs.append((i, t))
+    return pairs
+
+
+def test_round_robin_gives_every_target_k_views_and_each_position_at_most_once():
+    rng = np.random.default_rng(3)
+    targets, positions = rng.uniform(0, 1, (7, 3)), rng.uniform(0, 1, (60, 3))
+    views = round_robin_views(targets, positions, rounds=8, seed=5)
+    assert len(views) == 56
+    assert np.bincount(views.target_ids, minlength=7).tolist() == [8] * 7
+    assert len(np.unique(views.position_ids)) == len(views.position_ids)
+    assert np.array_equal(views.look_ats, targets[views.target_ids])
+    assert list(zip(views.position_ids.tolist(), views.target_ids.tolist())) == _brute_round_robin(targets, positions, 8, 5)
+    # fewer positions than targets x rounds: each position once, every target its share
+    short = round_robin_views(targets, positions[:30], rounds=8, seed=5)
+    assert len(short) == 30 and set(np.bincount(short.target_ids).tolist()) <= {4, 5}
+
+
+def test_farthest_point_sampling_matches_brute_force():
+    rng = np.random.default_rng(1)
+    points = rng.normal(size=(200, 3))
+    chosen = farthest_point_sampling(points, 12, seed=4)
+    expected = [int(np.random.default_rng(4).integers(200))]
+    for _ in range(11):
+        d = np.array([min(np.sum((p - points[c]) ** 2) for c in expected) for p in points])
+        expected.append(int(np.argmax(d)))
+    assert chosen.tolist() == expected
+    assert farthest_point_sampling(points[:5], 12).tolist() == list(range(5))
+
+
+def test_surface_frontiers_match_brute_force():
+    rng = np.random.default_rng(2)
+    occupied = np.unique(rng.integers(0, 6, (40, 3)), axis=0)
+    free = np.unique(rng.integers(0, 6, (60, 3)), axis=0)
+    free = free[~(free[:, None, :] == occupied[None]).all(-1).any(1)]
+    got = {tuple(k) for k in surface_frontiers(occupied, free)}
+    occ, fre = {tuple(k) for k in occupied}, {tuple(k) for k in free}
+    faces = [(1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1)]
+    expected = set()
+    for key in itertools.product(range(-1, 8), repeat=3):
+        if key in occ or key in fre:
+            continue
+        nb = [tuple(np.add(key, f)) for f in faces]
+        if any(n in occ for n in nb) and any(n in fre for n in nb):
+            expected.add(key)
+    assert got == expected
+
+
+def test_free_space_stops_short_of_the_observed_voxel():
+    keys = free_space_keys(np.zeros(3), np.array([[0.105, 0.005, 0.005]]), 0.01)
+    assert keys[:, 0].min() == 0 and keys[:, 0].max() == 9 and np.all(keys[:, 1:] == 0)
+
+
+# ----------------------------------------------------------------------------- one case
+
+
+@pytest.fixture(scope="module")
+def scene(tmp_path_factory):
+    previous = generate_row("room1", 0, 0, point_spacing=0.008).points
+    current = generate_row("room1", 0, 1, point_spacing=0.008).points
+    return greenhouse.build_row_scene(previous, current, QUICK, cache_dir=tmp_path_factory.mktemp("oracle"))
+
+
+def test_oracle_is_cached_on_disk_by_scene_and_configuration(scene, tmp_path):
+    grid, viewpoints = scene.grid, scene.room.view_box.grid(QUICK.oracle_grid)
+    ids, cached = greenhouse.cached_oracle(grid, viewpoints, 2.0, tmp_path)
+    assert not cached and np.array_equal(ids, scene.oracle)
+    again, cached = greenhouse.cached_oracle(grid, viewpoints, 2.0, tmp_path)
+    assert cached and np.array_equal(again, ids)
+    other, cached = greenhouse.cached_oracle(grid, viewpoints, 1.5, tmp_path)  # another range: another entry
+    assert not cached and len(other) < len(ids)
+    for entry in (tmp_path / "oracle").iterdir():  # a damaged entry is recomputed
+        entry.write_bytes(b"not an array")
+    repaired, cached = greenhouse.cached_oracle(grid, viewpoints, 2.0, tmp_path)
+    assert not cached and np.array_equal(repaired, ids)
+
+
+def test_ours_plans_executes_and_beats_random_selection_at_equal_views(scene):
+    result = greenhouse.run_row_case(scene, QUICK)
+    assert result.n_views == 15 + len(result.selected) and result.selection.optimal
+    assert result.coverage_passive < result.coverage <= 1.0
+    assert result.path_length == pytest.approx(result.path.length + scene.room.passive_cost)
+    assert result.path.gap <= QUICK.path.band_gap + 1e-9
+    # the executed views are the path's order of the selected candidates, each candidate once
+    assert len(np.unique(result.selected)) == len(result.selected)
+    candidates = greenhouse.row_candidates(scene, "transfer", QUICK, result.transfer)
+    truth = greenhouse.candidate_truth(scene, candidates)
+    random = [greenhouse.random_selection(scene, candidates, truth, len(result.selected), r, QUICK)
+              for r in range(3)]
+    assert result.coverage > max(r["coverage"] for r in random)
+    assert greenhouse.upper_limit(scene, truth) >= greenhouse.row_coverage(scene, greenhouse.execute(
+        scene, result.positions, result.look_ats), with_passive=False) - 1e-12
+
+
+def test_priors_give_800_candidate_views_each(scene):
+    transfer = greenhouse.row_transfer(scene, QUICK)
+    box = scene.room.plant_box
+    for prior in ("obb", "passive", "transfer"):
+        candidates = greenhouse.row_candidates(scene, prior, QUICK, transfer)
+        assert len(candidates) == 800 and len(candidates.targets) == 100
+        assert box.contains(candidates.targets, tol=0.05).mean() > 0.95
+        assert np.isin(candidates.position_ids, np.arange(1000)).all()
+    with pytest.raises(ConfigError, match="unknown look-at prior"):
+        greenhouse.row_candidates(scene, "magic", QUICK)
+
+
+# ----------------------------------------------------------------------------- bad input
+
+
+def test_row_outside_its_rooms_boxes_is_one_clear_error():
+    points = generate_row("room1", 0, 0, point_spacing=0.02).points
+    with pytest.raises(PointCloudError, match="outside its room's boxes"):
+        greenhouse.build_row_scene(points, points + [5.0, 0.0, 0.0], QUICK, cache_dir=False)
+
+
+def test_empty_passive_scan_is_one_clear_error():
+    points = generate_row("room1", 0, 0, point_spacing=0.02).points
+    blind = rows.quick_config({"sensor.max_range": 0.05, "registration.method": "none"})
+    with pytest.raises(PointCloudError, match="empty passive scan"):
+        greenhouse.build_row_scene(points, points, blind, cache_dir=False)
+
+
+def test_dataset_folder_without_sessions_is_one_clear_error(tmp_path, capsys):
+    with pytest.raises(InputFileError, match="no Processed_3D_Model"):
+        rows.dataset_cases(tmp_path)
+    (tmp_path / "Processed_3D_Model").mkdir()
+    (tmp_path / "Processed_3D_Model" / "room1_20250915.pcd").write_bytes(b"")
+    assert main(["greenhouse", "--dataset", str(tmp_path), "--output", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "no two sessions of one room" in err[0]
+
+
+# ----------------------------------------------------------------------------- runner and CLI
+
+
+def test_row_experiments_cache_and_tables(tmp_path):
+    settings = rows.RowSettings(cover_resolutions=(0.10,), budgets=(50,), repetitions=2)
+    case = rows.RowCase("room1", 0, point_spacing=0.008)
+    methods = ["coarse", "ours", "prior-obb-random", "upper-limit"]
+    raw = rows.run_row_experiments([case], methods, QUICK, settings, cache_dir=tmp_path / "cache", progress=False)
+    assert sorted(raw["method"].unique()) == sorted(methods)
+    assert len(raw[raw["method"] == "prior-obb-random"]) == 2 and len(raw[raw["method"] == "upper-limit"]) == 3
+    again = rows.run_row_experiments([case], methods, QUICK, settings, cache_dir=tmp_path / "cache", progress=False)
+    pd.testing.assert_frame_equal(raw, again)  # read back from the cache, identical
+    written = rows.write_results(tmp_path / "out", raw, QUICK, settings)
+    table6 = written["table6_coverage_effort"]
+    coarse = table6[table6["method"] == "coarse"].iloc[0]
+    assert coarse["views_mean"] == 15 and coarse["paper_coverage"] == pytest.approx(44.48)
+    assert (tmp_path / "out" / "figures" / "coverage_path_frontier.png").stat().st_size > 0
+    assert set(written["table5_upper_limit"]["prior"]) == {"obb", "passive", "transfer"}
+    with pytest.raises(ConfigError, match="unknown row experiment method"):
+        rows.run_row_experiments([case], ["magic"], QUICK, settings)
+
+
+def test_standin_clean_then_tpvp_greenhouse_on_the_dataset(tmp_path, capsys):
+    from data_tools.cli import main as data_main
+
+    raw, dataset = tmp_path / "raw", tmp_path / "dataset"
+    assert data_main(["greenhouse", "standin", "--output", str(raw), "--sessions", "2"]) == 0
+    assert data_main(["greenhouse", "clean", str(raw), "--landmarks", str(raw / "landmarks"),
+                      "--output", str(dataset)]) == 0
+    capsys.readouterr()
+    out = tmp_path / "plan"
+    assert main(["greenhouse", "--dataset", str(dataset), "--quick", "--output", str(out),
+                 "--cache", str(tmp_path / "cache")]) == 0
+    printed = capsys.readouterr().out
+    assert "coverage of the oracle set" in printed
+    summary = json.loads((out / "results.json").read_text())
+    assert summary["room"] == "room1" and summary["views"] > 15 and 0.4 < summary["coverage"] <= 1.0
+    plan = pd.read_csv(out / "plan.csv", comment="#")
+    assert (plan["role"] == "passive").sum() == 15 and len(plan) == summary["views"]
+    for name in ("plan.json", "plan.png", "recording.rrd", "config.yaml", "provenance.json"):
+        assert (out / name).stat().st_size > 0

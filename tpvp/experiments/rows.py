@@ -1,0 +1,339 @@
+"""The greenhouse-row experiments of the paper (Tables V-VI): cases x methods, cached, in parallel.
+
+A *case* is one consecutive session pair of one row (default: generated rows of room1 and room4,
+five sessions each, 4 pairs per row = 8 cases; or the real rows of a cleaned dataset folder). A
+*method* is a named entry of :data:`ROW_METHODS` that turns a case's scene into result rows. The
+runner, the cache and the parallel execution are those of the plant experiments
+(:mod:`tpvp.experiments.runner`).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import re
+import time
+from dataclasses import asdict, dataclass, replace
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from tpvp import __version__
+from tpvp.config import RowConfig, make_config, to_dict
+from tpvp.errors import ConfigError, InputFileError
+from tpvp.experiments.runner import cached_table, code_fingerprint, run_cases
+from tpvp.registry import Registry
+
+ROOMS = ("room1", "room4")
+SESSIONS = 5
+PRIORS = ("obb", "passive", "transfer")
+PAPER_TABLE = Path(__file__).resolve().parent.parent / "data" / "paper" / "greenhouse_rows.csv"
+SESSION_FILE = re.compile(r"^(?P<room>room\d+)_(?P<date>20\d{6})\.(pcd|ply)$")
+
+ROW_METHODS = Registry("row experiment method")
+
+
+@dataclass(frozen=True)
+class RowSettings:
+    """What the baselines sweep: Ours' covering voxels (m), the random baselines' budgets and
+    repetitions, Block-wise NBV's budgets (prefixes of one run of the largest)."""
+
+    cover_resolutions: tuple = (0.10, 0.05, 0.04, 0.03)
+    budgets: tuple = (100, 300, 500)
+    repetitions: int = 5
+    nbv_budgets: tuple = (100, 300, 500)
+
+
+@dataclass(frozen=True)
+class RowCase:
+    """Sessions ``previous`` -> ``previous + 1`` of a row: generated (``seed``) or files of a
+    cleaned dataset (``files``)."""
+
+    room: str
+    previous: int
+    seed: int = 0
+    files: tuple = ()  # (previous file, current file) of a dataset; empty for a generated row
+    point_spacing: float = 0.004
+
+    @property
+    def source(self) -> str:
+        return "dataset" if self.files else "generated"
+
+    @property
+    def name(self) -> str:
+        if self.files:
+            return f"{Path(self.files[0]).stem} -> {Path(self.files[1]).stem}"
+        return f"{self.room} seed {self.seed} sessions {self.previous}->{self.previous + 1}"
+
+    def labels(self) -> dict:
+        return {"source": self.source, "room": self.room, "case": self.name, "previous_session": self.previous}
+
+    def load(self) -> tuple[np.ndarray, np.ndarray]:
+        if self.files:
+            from tpvp.io import read_point_cloud
+
+            return tuple(read_point_cloud(Path(f), units="m") for f in self.files)
+        from tpvp.synthetic.greenhouse import generate_row_sessions
+
+        sessions = generate_row_sessions(self.room, self.seed, self.previous + 2, self.point_spacing)
+        return sessions[self.previous].points, sessions[self.previous + 1].points
+
+
+def dataset_cases(folder, rooms=ROOMS) -> list[RowCase]:
+    """Consecutive session pairs of every room in a dataset written by ``python -m data_tools
+    greenhouse clean`` (``Processed_3D_Model/<room>_<YYYYMMDD>.pcd``)."""
+    folder = Path(folder)
+    models = folder / "Processed_3D_Model"
+    if not models.is_dir():
+        raise InputFileError(f"{folder}: no Processed_3D_Model/ folder - write one with "
+                             f"'python -m data_tools greenhouse clean SOURCE --output {folder}'")
+    sessions = {}
+    for path in sorted(models.iterdir()):
+        match = SESSION_FILE.match(path.name)
+        if match and match["room"] in rooms:
+            sessions.setdefault(match["room"], []).append(path)
+    cases = [RowCase(room, i, files=(str(a), str(b))) for room, paths in sorted(sessions.items())
+             for i, (a, b) in enumerate(zip(paths[:-1], paths[1:]))]
+    if not cases:
+        raise InputFileError(f"{models}: no two sessions of one room (files <room>_<YYYYMMDD>.pcd of "
+                             f"{', '.join(rooms)}): nothing to pair")
+    return cases
+
+
+def default_row_cases(quick: bool = False, dataset=None, rooms=ROOMS, seed: int = 0) -> list[RowCase]:
+    """The paper's 8 cases (4 consecutive pairs of each room), or one in quick mode."""
+    cases = dataset_cases(dataset, rooms) if dataset is not None else \
+        [RowCase(room, k, seed) for room in rooms for k in range(SESSIONS - 1)]
+    return cases[:1] if quick else cases
+
+
+def quick_config(overrides: dict | None = None) -> RowConfig:
+    """A coarse configuration for CI and quick notebooks: 2 cm ground truth; the oracle grid and
+    the inflation voxels follow their rules (0.2 m, 2 cm)."""
+    return make_config("row", {"gt_resolution": 0.02} | dict(overrides or {}))
+
+
+def quick_settings() -> RowSettings:
+    return RowSettings(cover_resolutions=(0.10, 0.05), budgets=(100, 300), repetitions=2, nbv_budgets=(50, 100))
+
+
+# --------------------------------------------------------------------------------------------------
+# methods
+# --------------------------------------------------------------------------------------------------
+
+_memo: dict = {}
+
+
+def _shared(scene, key, compute):
+    """Per-process memo of what several methods of one scene need (transfer, candidates, their
+    ground-truth visibility)."""
+    if _memo.get("scene") is not scene:
+        _memo.clear()
+        _memo["scene"] = scene
+    if key not in _memo:
+        _memo[key] = compute()
+    return _memo[key]
+
+
+def _transfer(scene, config):
+    from tpvp.experiments.greenhouse import row_transfer
+
+    return _shared(scene, ("transfer", repr(config.registration), repr(config.inflation)),
+                   lambda: row_transfer(scene, config))
+
+
+def _candidates(scene, prior, config):
+    from tpvp.experiments.greenhouse import candidate_truth, row_candidates
+
+    def compute():
+        t = time.perf_counter()
+        candidates = row_candidates(scene, prior, config, _transfer(scene, config) if prior == "transfer" else None)
+        return candidates, candidate_truth(scene, candidates), time.perf_counter() - t
+
+    return _shared(scene, ("candidates", prior, repr(config.targets)), compute)
+
+
+@ROW_METHODS.register("coarse", "the passive sweep alone (15 fixed views)")
+def coarse(scene, config, settings):
+    from tpvp.experiments.greenhouse import row_coverage
+
+    return [{"views": len(scene.room.initial_positions), "coverage": row_coverage(scene, []),
+             "path_length_m": scene.room.passive_cost, "seconds_planning": 0.0}]
+
+
+@ROW_METHODS.register("ours", "the paper's method at each covering voxel (passive warm start included)")
+def ours(scene, config, settings):
+    from tpvp.experiments.greenhouse import run_row_case
+
+    rows = []
+    for resolution in settings.cover_resolutions:
+        case_config = replace(config, selection=replace(config.selection, cover_resolution=float(resolution)))
+        result = run_row_case(scene, case_config, transferred=_transfer(scene, config))
+        summary = result.summary()
+        rows.append({"prior": "transfer", "cover_resolution_cm": round(100 * resolution, 3), **summary,
+                     "seconds_planning": summary["seconds_planning"]})
+    return rows
+
+
+def _random(prior):
+    def method(scene, config, settings):
+        from tpvp.experiments.greenhouse import random_selection
+
+        candidates, truth, seconds = _candidates(scene, prior, config)
+        return [{"prior": prior, **random_selection(scene, candidates, truth, budget, repetition, config,
+                                                    with_passive=prior != "obb"), "seconds_candidates": seconds}
+                for budget in settings.budgets for repetition in range(settings.repetitions)]
+    return method
+
+
+for _prior in PRIORS:
+    ROW_METHODS.register(f"prior-{_prior}-random", f"{_prior} look-at prior, 800 candidates, random selection")(
+        _random(_prior))
+
+
+@ROW_METHODS.register("upper-limit", "Table V: the share of the oracle all 800 candidates of each prior reach")
+def upper_limit_rows(scene, config, settings):
+    from tpvp.experiments.greenhouse import upper_limit
+
+    rows = []
+    for prior in PRIORS:
+        candidates, truth, seconds = _candidates(scene, prior, config)
+        rows.append({"prior": prior, "coverage": upper_limit(scene, truth), "views": len(candidates),
+                     "seconds_candidates": seconds})
+    return rows
+
+
+ALL_METHODS = ("coarse", "ours", "prior-obb-random", "prior-passive-random", "prior-transfer-random", "upper-limit")
+
+
+# --------------------------------------------------------------------------------------------------
+# runner
+# --------------------------------------------------------------------------------------------------
+
+
+def task_key(case: RowCase, method: str, config: RowConfig, settings: RowSettings) -> str:
+    payload = {"case": asdict(case), "method": method, "config": to_dict(config), "settings": asdict(settings),
+               "version": __version__, "code": code_fingerprint()}
+    return hashlib.sha256(json.dumps(payload, sort_keys=True, default=str).encode()).hexdigest()[:20]
+
+
+@lru_cache(maxsize=1)
+def _scene(case: RowCase, config: RowConfig, oracle_cache):
+    from tpvp.experiments.greenhouse import build_row_scene
+
+    previous, current = case.load()
+    return build_row_scene(previous, current, config, room=case.room, names=(f"{case.name} (previous)",
+                                                                              f"{case.name} (current)"),
+                           cache_dir=oracle_cache)
+
+
+def run_row_task(case: RowCase, method: str, config: RowConfig, settings: RowSettings, cache_dir=None) -> pd.DataFrame:
+    """The rows of one (case, method), from the cache when present; written to it otherwise. The
+    case's oracle is cached in ``cache_dir/oracle`` (or the default cache folder)."""
+    path = Path(cache_dir) / f"{task_key(case, method, config, settings)}.parquet" if cache_dir else None
+    function = ROW_METHODS.get(method)
+    case_config = replace(config, view_space=case.room)
+
+    def compute():
+        t0 = time.perf_counter()
+        scene = _scene(case, case_config, str(cache_dir) if cache_dir else None)
+        rows = function(scene, case_config, settings)
+        seconds = time.perf_counter() - t0
+        extra = {"oracle_voxels": len(scene.oracle), "seconds_oracle": scene.timings.get("oracle", 0.0),
+                 "oracle_cached": scene.oracle_cached}
+        return pd.DataFrame([{**case.labels(), "method": method, **row, **extra, "seconds_task": seconds}
+                             for row in rows])
+
+    return cached_table(path, compute)
+
+
+def run_row_case_tasks(case: RowCase, methods, config: RowConfig, settings: RowSettings, cache_dir=None) -> list:
+    return [run_row_task(case, method, config, settings, cache_dir) for method in methods]
+
+
+def run_row_experiments(cases, methods=ALL_METHODS, config: RowConfig | None = None, settings: RowSettings = RowSettings(),
+                        cache_dir=None, workers: int = 1, progress: bool = True, scheduler=None) -> pd.DataFrame:
+    """Every (case, method) task, here, in ``workers`` processes or on a Dask cluster
+    (:func:`tpvp.experiments.runner.run_cases`); the raw table of all rows."""
+    config = config or make_config("row")
+    methods = list(methods)
+    for method in methods:
+        ROW_METHODS.get(method)  # an unknown name fails before any work
+    cases = list(cases)
+    if not cases or not methods:
+        raise ConfigError("no task: the case list or the method list is empty")
+    tables = run_cases(run_row_case_tasks, cases, (methods, config, settings, cache_dir), len(methods),
+                       workers=workers, scheduler=scheduler, progress=progress, desc="row experiments")
+    raw = pd.concat(tables, ignore_index=True)
+    order = {m: i for i, m in enumerate(methods)}
+    return raw.sort_values(["room", "previous_session", "method"],
+                           key=lambda c: c.map(order) if c.name == "method" else c, kind="stable").reset_index(drop=True)
+
+
+# --------------------------------------------------------------------------------------------------
+# tables
+# --------------------------------------------------------------------------------------------------
+
+
+def paper_values() -> pd.DataFrame:
+    return pd.read_csv(PAPER_TABLE)
+
+
+def tables(raw: pd.DataFrame) -> dict:
+    """Table V (upper limit per prior), Table VI (views, coverage, path per method and budget or
+    covering voxel; random baselines averaged over repetitions first), planning time, each with the
+    paper's numbers beside ours."""
+    from tpvp.experiments.plants import _mean_std
+
+    raw = raw.copy()
+    for column in ("prior", "budget", "cover_resolution_cm", "views", "coverage", "path_length_m",
+                   "seconds_planning", "seconds_task"):
+        if column not in raw:
+            raw[column] = np.nan
+    paper = paper_values()
+    upper = _mean_std(raw[raw["method"] == "upper-limit"], ["source", "prior"], columns=("coverage",))
+    upper = upper.merge(paper[paper["table"] == "V"][["prior", "coverage_mean", "coverage_std"]]
+                        .rename(columns={"coverage_mean": "paper_coverage_mean", "coverage_std": "paper_coverage_std"}),
+                        on="prior", how="left")
+    main = raw[raw["method"] != "upper-limit"].copy()
+    keys = ["source", "method", "budget", "cover_resolution_cm"]
+    # Repetitions of a random baseline: one value per case first, then mean ± std across cases.
+    per_case = main.groupby(keys + ["case"], dropna=False, sort=False)[["views", "coverage", "path_length_m"]] \
+        .mean().reset_index()
+    table6 = _mean_std(per_case, keys)
+    paper6 = paper[paper["table"] == "VI"][["method", "budget", "cover_resolution_cm", "views_mean", "coverage_mean",
+                                            "path_mean"]].rename(columns={"views_mean": "paper_views",
+                                                                          "coverage_mean": "paper_coverage",
+                                                                          "path_mean": "paper_path_length_m"})
+    table6 = table6.merge(paper6, on=["method", "budget", "cover_resolution_cm"], how="left")
+    timing_columns = [c for c in raw.columns if c.startswith("seconds_")]
+    timing = _mean_std(main, ["source", "method", "cover_resolution_cm"], columns=timing_columns)
+    return {"table5_upper_limit": upper, "table6_coverage_effort": table6, "planning_time": timing}
+
+
+def write_results(folder, raw: pd.DataFrame, config: RowConfig | None = None, settings: RowSettings = RowSettings()) -> dict:
+    """The raw table, Tables V-VI and timing (CSV + Markdown), the paper's values and the
+    coverage-path frontier figure, as one published folder (whole or not at all)."""
+    from tpvp.config import config_yaml
+    from tpvp.experiments.plants import markdown
+    from tpvp.io import atomic_write_text
+    from tpvp.io.publish import staged_folder
+    from tpvp.provenance import provenance
+    from tpvp.viz.rows import plot_row_frontier
+
+    config = config or make_config("row")
+    written = {}
+    with staged_folder(folder) as stage:
+        atomic_write_text(stage.folder / "raw_cases.csv", raw.to_csv(index=False))
+        atomic_write_text(stage.folder / "paper_values.csv", paper_values().to_csv(index=False))
+        for name, table in tables(raw).items():
+            atomic_write_text(stage.folder / f"{name}.csv", table.to_csv(index=False))
+            atomic_write_text(stage.folder / f"{name}.md", markdown(table))
+            written[name] = table
+        plot_row_frontier(stage.folder / "figures" / "coverage_path_frontier.png", written["table6_coverage_effort"])
+        atomic_write_text(stage.folder / "config.yaml", config_yaml(config, "base configuration of the row experiments"))
+        atomic_write_text(stage.folder / "settings.json", json.dumps(asdict(settings), indent=2) + "\n")
+        atomic_write_text(stage.folder / "provenance.json", json.dumps(provenance(config), indent=2) + "\n")
+    return written

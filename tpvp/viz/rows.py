@@ -1,0 +1,80 @@
+"""Figures of the greenhouse-row experiments (offscreen PNG): the coverage-path frontier of every
+method, a plan's path from the top and the side, and the candidate views of the three look-at
+priors. Rows are drawn in the plant box's own frame (x along the row, z up)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+from matplotlib.collections import LineCollection
+
+from tpvp.viz.figures import _save, _subsample, plt
+
+_METHOD_STYLE = {"coarse": ("black", "s"), "blockwise-nbv": ("tab:blue", "^"), "prior-obb-random": ("tab:gray", "v"),
+                 "prior-passive-random": ("tab:olive", "D"), "prior-transfer-random": ("tab:orange", "P"),
+                 "ours": ("tab:red", "o")}
+
+
+def plot_row_frontier(path, table6: pd.DataFrame, title: str = ""):
+    """Coverage vs path length (and vs views) of every method of Table VI, ours and the paper's."""
+    fig, axes = plt.subplots(1, 2, figsize=(12, 4.6))
+    for ax, (x, paper_x, label) in zip(axes, (("path_length_m_mean", "paper_path_length_m", "path length (m)"),
+                                              ("views_mean", "paper_views", "views (passive included)"))):
+        for method, rows in table6.groupby("method", sort=False):
+            colour, marker = _METHOD_STYLE.get(method, ("tab:purple", "x"))
+            rows = rows.sort_values(x)
+            ax.plot(rows[x], rows["coverage_mean"], marker=marker, color=colour, label=f"{method} (ours)")
+            if paper_x in rows and rows[paper_x].notna().any():
+                ax.plot(rows[paper_x], rows["paper_coverage"], marker=marker, color=colour, linestyle=":",
+                        markerfacecolor="none", label=f"{method} (paper)")
+        ax.set_xlabel(label)
+        ax.set_ylabel("coverage of the oracle set (%)")
+        ax.grid(alpha=0.3)
+    axes[1].legend(fontsize=7, loc="lower right", ncol=2)
+    fig.suptitle(title or "Greenhouse rows: coverage-effort frontier (solid: ours, dotted: the paper)")
+    fig.tight_layout()
+    return _save(fig, path)
+
+
+def plot_row_paths(path, box, row_points, plans: dict, title: str = ""):
+    """Each plan's path from the top and the side, in the plant box frame. ``plans``: label ->
+    ``(positions in execution order (n, 3), subtitle)``."""
+    row_local = box.to_local(_subsample(row_points, limit=40_000)[0])
+    fig, axes = plt.subplots(2, len(plans), figsize=(6.5 * len(plans), 7.5), squeeze=False)
+    for column, (label, (positions, subtitle)) in enumerate(plans.items()):
+        local = box.to_local(np.asarray(positions).reshape(-1, 3))
+        for row, (a, b, name) in enumerate(((0, 1, "top"), (0, 2, "side"))):
+            ax = axes[row, column]
+            ax.scatter(row_local[:, a], row_local[:, b], s=0.2, color="tab:green", alpha=0.3)
+            ax.plot(local[:, a], local[:, b], "-", color="tab:purple", linewidth=0.6)
+            ax.scatter(local[:, a], local[:, b], s=4, color="tab:red", zorder=3)
+            ax.set_aspect("equal")
+            ax.set_xlabel("along the row (m)")
+            ax.set_ylabel("across (m)" if b == 1 else "height (m)")
+            ax.set_title(f"{label}, {name} view" + (f"\n{subtitle}" if row == 0 and subtitle else ""), fontsize=9)
+    fig.suptitle(title)
+    fig.tight_layout()
+    return _save(fig, path)
+
+
+def plot_prior_candidates(path, box, row_points, candidate_sets: dict, title: str = ""):
+    """The look-at targets and candidate positions of each prior (side view, plant box frame);
+    a line joins each candidate position to its target."""
+    row_local = box.to_local(_subsample(row_points, limit=40_000)[0])
+    fig, axes = plt.subplots(1, len(candidate_sets), figsize=(6 * len(candidate_sets), 3.8), squeeze=False)
+    for ax, (label, candidates) in zip(axes[0], candidate_sets.items()):
+        positions, look_ats = box.to_local(candidates.positions), box.to_local(candidates.look_ats)
+        targets = box.to_local(candidates.targets)
+        ax.scatter(row_local[:, 0], row_local[:, 2], s=0.2, color="tab:green", alpha=0.3)
+        segments = np.stack([positions[:, [0, 2]], look_ats[:, [0, 2]]], axis=1)
+        ax.add_collection(LineCollection(segments, colors="tab:blue", linewidths=0.2, alpha=0.3))
+        ax.scatter(positions[:, 0], positions[:, 2], s=2, color="tab:blue", label="candidate positions")
+        ax.scatter(targets[:, 0], targets[:, 2], s=10, color="tab:red", marker="x", label="look-at targets")
+        ax.set_aspect("equal")
+        ax.set_xlabel("along the row (m)")
+        ax.set_ylabel("height (m)")
+        ax.set_title(f"{label}: {len(targets)} targets, {len(positions)} views", fontsize=9)
+    axes[0, 0].legend(fontsize=7, loc="upper right")
+    fig.suptitle(title)
+    fig.tight_layout()
+    return _save(fig, path)
