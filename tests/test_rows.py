@@ -206,3 +206,18 @@ def test_standin_clean_then_tpvp_greenhouse_on_the_dataset(tmp_path, capsys):
     assert (plan["role"] == "passive").sum() == 15 and len(plan) == summary["views"]
     for name in ("plan.json", "plan.png", "recording.rrd", "config.yaml", "provenance.json"):
         assert (out / name).stat().st_size > 0
+
+
+def test_blockwise_nbv_and_pose_noise_rows(tmp_path):
+    settings = rows.RowSettings(nbv_budgets=(10, 20), pose_noise_draws=1, pose_noise_resolution=0.10,
+                                pose_noise_levels=((0.0, 0.0), (0.01, 2.0)))
+    case = rows.RowCase("room1", 0, point_spacing=0.008)
+    raw = rows.run_row_experiments([case], ["blockwise-nbv", "pose-noise"], QUICK, settings, progress=False)
+    nbv = raw[raw["method"] == "blockwise-nbv"]
+    assert nbv["views"].tolist() == [10, 20]
+    assert nbv["coverage"].is_monotonic_increasing and nbv["path_length_m"].is_monotonic_increasing
+    table7 = rows.tables(raw)["table7_pose_noise"]
+    assert len(table7) == 3  # noise-free, noisy without ICP, noisy with ICP
+    free, off, on = (table7.iloc[i] for i in range(3))
+    assert free["precision_10mm_mean"] == pytest.approx(1.0)
+    assert off["precision_10mm_mean"] < free["precision_10mm_mean"] and on["chamfer_mm_mean"] < off["chamfer_mm_mean"]

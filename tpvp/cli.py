@@ -197,7 +197,7 @@ def _experiments_plants(args) -> int:
 def _row_config(args):
     from tpvp.config import load_config, parse_overrides
 
-    overrides = {"view_space": args.room}
+    overrides = {"view_space": getattr(args, "room", "room1")}
     if args.cover_resolution is not None:
         overrides["selection.cover_resolution"] = args.cover_resolution
     if args.coverage_target is not None:
@@ -413,7 +413,7 @@ def build_parser() -> argparse.ArgumentParser:
     _row_options(rows, "outputs/experiments/rows")
     rows.add_argument("--rooms", nargs="+", default=["room1", "room4"], help="(default: %(default)s)")
     rows.add_argument("--methods", nargs="+", default=None,
-                      help="methods to run (default: coarse, ours, prior-obb-random, prior-passive-random, "
+                      help="methods to run (default: coarse, blockwise-nbv, ours, prior-obb-random, prior-passive-random, "
                            "prior-transfer-random, upper-limit)")
     rows.add_argument("--workers", type=int, default=2, help="parallel processes (default: %(default)s)")
     rows.add_argument("--scheduler", default=None, metavar="ADDRESS",

@@ -25,6 +25,7 @@ from tpvp.inflation import InflationConfig
 from tpvp.nbv import OccupancyMapConfig
 from tpvp.path.tsp import TspConfig
 from tpvp.registration import EDConfig
+from tpvp.registration.warp_field import WarpFieldConfig
 from tpvp.sensor.sensor import SensorConfig
 from tpvp.setcover import SetCoverConfig
 
@@ -101,6 +102,7 @@ class RegistrationConfig:
 
     method: str = "embedded-deformation"
     embedded_deformation: EDConfig = field(default_factory=EDConfig)
+    warp_field: WarpFieldConfig = field(default_factory=WarpFieldConfig)
     warn_chamfer_fraction: float = 0.03
 
     def __post_init__(self):
@@ -223,7 +225,8 @@ class RowConfig:
     sensor: SensorConfig = field(default_factory=lambda: SensorConfig(max_range=2.0))
     nbv: NbvConfig = field(default_factory=lambda: NbvConfig(pixel_stride=20))
     registration: RegistrationConfig = field(
-        default_factory=lambda: RegistrationConfig(embedded_deformation=EDConfig(node_coverage=0.15)))
+        default_factory=lambda: RegistrationConfig(method="warp-field",
+                                                   embedded_deformation=EDConfig(node_coverage=0.15)))
     inflation: InflationConfig = field(default_factory=lambda: InflationConfig(0.01, 0.01, 0.01))
     selection: SelectionConfig = field(default_factory=lambda: SelectionConfig(cover_resolution=0.04))
     targets: RowTargetsConfig = field(default_factory=RowTargetsConfig)
@@ -260,6 +263,8 @@ DERIVED = {
     "row": {
         "oracle_grid": ("10 x gt_resolution", lambda c: 10 * c["gt_resolution"]),
         "registration.embedded_deformation.seed": ("seed", lambda c: c["seed"]),
+        "registration.warp_field.voxel": ("1 x gt_resolution (clouds reduced to voxel centroids)",
+                                          lambda c: c["gt_resolution"]),
         "inflation.step": ("1 x gt_resolution (voxel of the morphology)", lambda c: c["gt_resolution"]),
         "inflation.gamma_near": ("1 x gt_resolution", lambda c: c["gt_resolution"]),
         "inflation.gamma_far": ("1 x gt_resolution", lambda c: c["gt_resolution"]),

@@ -405,16 +405,18 @@ def optimum_ratio(done: pd.DataFrame) -> pd.DataFrame:
 
 
 def markdown(table: pd.DataFrame) -> str:
-    """A Markdown table with mean ± std columns merged."""
+    """A Markdown table with mean ± std columns merged (in the mean column's place)."""
     if table.empty:
         return "(no rows: the methods this table needs were not run)\n"
     table = table.copy()
     for column in [c for c in table.columns if c.endswith("_mean")]:
         base = column[: -len("_mean")]
         std = table.get(f"{base}_std")
-        table[base] = [f"{m:.2f} ± {s:.2f}" if pd.notna(m) else "" for m, s in
-                       zip(table[column], std if std is not None else [np.nan] * len(table))]
+        merged = [f"{m:.2f} ± {s:.2f}" if pd.notna(m) else "" for m, s in
+                  zip(table[column], std if std is not None else [np.nan] * len(table))]
+        table.insert(table.columns.get_loc(column), f"{base} ", merged)  # a placeholder name while both exist
         table = table.drop(columns=[column] + ([f"{base}_std"] if std is not None else []))
+        table = table.rename(columns={f"{base} ": base})
     header = "| " + " | ".join(map(str, table.columns)) + " |"
     rule = "|" + "|".join("---" for _ in table.columns) + "|"
     body = ["| " + " | ".join("" if (isinstance(v, float) and np.isnan(v)) else str(v) for v in row) + " |"

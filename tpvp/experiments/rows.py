@@ -30,6 +30,8 @@ ROOMS = ("room1", "room4")
 SESSIONS = 5
 PRIORS = ("obb", "passive", "transfer")
 PAPER_TABLE = Path(__file__).resolve().parent.parent / "data" / "paper" / "greenhouse_rows.csv"
+PAPER_POSE_NOISE = PAPER_TABLE.with_name("pose_noise.csv")
+PAPER_TIMING = PAPER_TABLE.with_name("row_timing.csv")
 SESSION_FILE = re.compile(r"^(?P<room>room\d+)_(?P<date>20\d{6})\.(pcd|ply)$")
 
 ROW_METHODS = Registry("row experiment method")
@@ -44,6 +46,9 @@ class RowSettings:
     budgets: tuple = (100, 300, 500)
     repetitions: int = 5
     nbv_budgets: tuple = (100, 300, 500)
+    pose_noise_draws: int = 5
+    pose_noise_levels: tuple = ((0.0, 0.0), (0.002, 0.5), (0.005, 1.0), (0.01, 2.0))  # (sigma_t m, sigma_r deg)
+    pose_noise_resolution: float = 0.04  # Table VII: Ours at 4 cm
 
 
 @dataclass(frozen=True)
@@ -116,7 +121,8 @@ def quick_config(overrides: dict | None = None) -> RowConfig:
 
 
 def quick_settings() -> RowSettings:
-    return RowSettings(cover_resolutions=(0.10, 0.05), budgets=(100, 300), repetitions=2, nbv_budgets=(50, 100))
+    return RowSettings(cover_resolutions=(0.10, 0.05), budgets=(100, 300), repetitions=2, nbv_budgets=(50, 100),
+                       pose_noise_draws=1, pose_noise_resolution=0.10, pose_noise_levels=((0.0, 0.0), (0.01, 2.0)))
 
 
 # --------------------------------------------------------------------------------------------------
@@ -205,7 +211,37 @@ def upper_limit_rows(scene, config, settings):
     return rows
 
 
-ALL_METHODS = ("coarse", "ours", "prior-obb-random", "prior-passive-random", "prior-transfer-random", "upper-limit")
+@ROW_METHODS.register("blockwise-nbv", "sequential block-wise NBV (Zaenker et al. 2021); budgets are prefixes of one run")
+def blockwise(scene, config, settings):
+    from tpvp.nbv.blockwise import blockwise_nbv
+    from tpvp.visibility import coverage_ratio
+
+    run = blockwise_nbv(scene.grid, scene.room, max(settings.nbv_budgets), sensor=config.sensor, seed=config.seed)
+    return [{"budget": int(budget), "views": int(budget),
+             "coverage": coverage_ratio(np.flatnonzero(run.covered_after(budget)), scene.oracle),
+             "path_length_m": run.path_after(budget), "seconds_planning": float(np.sum(run.seconds[:budget])),
+             "seconds_per_iteration": float(np.mean(run.seconds[:budget]))}
+            for budget in settings.nbv_budgets]
+
+
+@ROW_METHODS.register("pose-noise", "Table VII: Ours' executed views with pose noise, fused with and without ICP")
+def pose_noise(scene, config, settings):
+    from tpvp.experiments.greenhouse import run_row_case
+    from tpvp.experiments.pose_noise import PoseNoiseConfig, passive_map, pose_noise_study
+
+    case_config = replace(config, selection=replace(config.selection, cover_resolution=settings.pose_noise_resolution))
+    plan = run_row_case(scene, case_config, transferred=_transfer(scene, config))
+    noise = PoseNoiseConfig(levels=tuple(map(tuple, settings.pose_noise_levels)), draws=settings.pose_noise_draws,
+                            seed=config.seed)
+    passive = passive_map(scene.grid, scene.room.initial_positions, scene.room.initial_look_ats, scene.sensor)
+    table = pose_noise_study(scene.grid.centres[scene.grid.countable], scene.grid, passive, plan.positions,
+                             plan.look_ats, noise, scene.sensor)
+    return [{"views": plan.n_views, "cover_resolution_cm": round(100 * settings.pose_noise_resolution, 3), **row}
+            for row in table.to_dict(orient="records")]
+
+
+ALL_METHODS = ("coarse", "blockwise-nbv", "ours", "prior-obb-random", "prior-passive-random", "prior-transfer-random",
+               "upper-limit")
 
 
 # --------------------------------------------------------------------------------------------------
@@ -278,7 +314,18 @@ def run_row_experiments(cases, methods=ALL_METHODS, config: RowConfig | None = N
 
 
 def paper_values() -> pd.DataFrame:
+    """Tables V and VI of the paper (coverage in %, path in m)."""
     return pd.read_csv(PAPER_TABLE)
+
+
+def paper_pose_noise() -> pd.DataFrame:
+    """Table VII of the paper (Chamfer in mm, precision / recall / F1 in %)."""
+    return pd.read_csv(PAPER_POSE_NOISE)
+
+
+def paper_timing() -> pd.DataFrame:
+    """The paper's planning times in rows (14 cores)."""
+    return pd.read_csv(PAPER_TIMING)
 
 
 def tables(raw: pd.DataFrame) -> dict:
@@ -308,9 +355,20 @@ def tables(raw: pd.DataFrame) -> dict:
                                                                           "coverage_mean": "paper_coverage",
                                                                           "path_mean": "paper_path_length_m"})
     table6 = table6.merge(paper6, on=["method", "budget", "cover_resolution_cm"], how="left")
-    timing_columns = [c for c in raw.columns if c.startswith("seconds_")]
-    timing = _mean_std(main, ["source", "method", "cover_resolution_cm"], columns=timing_columns)
-    return {"table5_upper_limit": upper, "table6_coverage_effort": table6, "planning_time": timing}
+    timing_columns = [c for c in ("seconds_planning", "seconds_registration", "seconds_targets", "seconds_visibility",
+                                  "seconds_selection", "seconds_path", "seconds_per_iteration", "seconds_oracle",
+                                  "seconds_task") if c in raw]
+    timing = _mean_std(main[main["method"] != "pose-noise"], ["source", "method", "cover_resolution_cm"],
+                       columns=timing_columns)
+    out = {"table5_upper_limit": upper, "table6_coverage_effort": table6[table6["method"] != "pose-noise"],
+           "planning_time": timing}
+    noise = raw[raw["method"] == "pose-noise"]
+    if len(noise):
+        from tpvp.experiments.pose_noise import summarise
+
+        out["table7_pose_noise"] = pd.concat([summarise(rows).assign(source=source)
+                                              for source, rows in noise.groupby("source")], ignore_index=True)
+    return out
 
 
 def write_results(folder, raw: pd.DataFrame, config: RowConfig | None = None, settings: RowSettings = RowSettings()) -> dict:
@@ -328,6 +386,7 @@ def write_results(folder, raw: pd.DataFrame, config: RowConfig | None = None, se
     with staged_folder(folder) as stage:
         atomic_write_text(stage.folder / "raw_cases.csv", raw.to_csv(index=False))
         atomic_write_text(stage.folder / "paper_values.csv", paper_values().to_csv(index=False))
+        atomic_write_text(stage.folder / "paper_pose_noise.csv", paper_pose_noise().to_csv(index=False))
         for name, table in tables(raw).items():
             atomic_write_text(stage.folder / f"{name}.csv", table.to_csv(index=False))
             atomic_write_text(stage.folder / f"{name}.md", markdown(table))

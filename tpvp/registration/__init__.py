@@ -6,4 +6,7 @@ from tpvp.registration.embedded_deformation import (
     register_embedded_deformation,
 )
 
-__all__ = ["EDConfig", "RegistrationResult", "register_embedded_deformation"]
+from tpvp.registration.warp_field import WarpFieldConfig, WarpFieldResult, register_warp_field
+
+__all__ = ["EDConfig", "RegistrationResult", "WarpFieldConfig", "WarpFieldResult", "register_embedded_deformation",
+           "register_warp_field"]

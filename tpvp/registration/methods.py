@@ -2,8 +2,8 @@
 
 Signature of a method: ``register(previous (N, 3), coarse (M, 3), config: RegistrationConfig)
 -> Alignment``, both clouds in metres in one frame. Each method reads its own section of the
-configuration (``config.embedded_deformation`` for ``embedded-deformation``). A new method is one
-function plus one ``@REGISTRATION_METHODS.register`` line.
+configuration (``config.embedded_deformation`` for ``embedded-deformation``, ``config.warp_field``
+for ``warp-field``). A new method is one function plus one ``@REGISTRATION_METHODS.register`` line.
 """
 
 from __future__ import annotations
@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from tpvp.registration.embedded_deformation import register_embedded_deformation
+from tpvp.registration.warp_field import register_warp_field
 from tpvp.registry import Registry
 
 REGISTRATION_METHODS = Registry("registration method")
@@ -22,9 +23,11 @@ REGISTRATION_METHODS = Registry("registration method")
 class Alignment:
     """The previous session moved onto the current coarse reconstruction.
 
-    warped: (N, 3) the previous session's points after alignment. chamfer_before/after (m): the
-    symmetric Chamfer distance to the coarse reconstruction. details: the method's own result
-    (e.g. ``RegistrationResult`` of embedded deformation, with its graph and ``warp``).
+    warped: (N, 3) the previous session's points after alignment (``warp-field`` first reduces
+    both clouds to 1 cm voxel centroids, as the reference does, and returns the reduced session).
+    chamfer_before/after (m): the symmetric Chamfer distance to the coarse reconstruction (for
+    ``warp-field``, between the reduced clouds). details: the method's own result (e.g.
+    ``RegistrationResult`` of embedded deformation or ``WarpFieldResult``, with its graph and ``warp``).
     """
 
     warped: np.ndarray
@@ -38,6 +41,13 @@ class Alignment:
 def embedded_deformation(previous, coarse, config) -> Alignment:
     """Embedded deformation optimised with Adam (the authors' single-plant registration)."""
     result = register_embedded_deformation(previous, coarse, config.embedded_deformation)
+    return Alignment(result.warped, result.chamfer_before, result.chamfer_after, result.seconds, result)
+
+
+@REGISTRATION_METHODS.register("warp-field")
+def warp_field(previous, coarse, config) -> Alignment:
+    """Sparse locally rigid warp-field ICP (the authors' greenhouse-row registration, cilantro)."""
+    result = register_warp_field(previous, coarse, config.warp_field)
     return Alignment(result.warped, result.chamfer_before, result.chamfer_after, result.seconds, result)
 
 
