@@ -48,6 +48,9 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/planning_bench.py
 	$(BIN)/python benchmarks/registration_bench.py
 	$(BIN)/python benchmarks/row_realism.py
+	$(BIN)/python benchmarks/row_case_bench.py
+	$(BIN)/python benchmarks/row_registration_bench.py
+	$(BIN)/python benchmarks/blockwise_nbv_bench.py
 
 # Every notebook in full mode (the paper's protocol); CI runs them in quick mode (make test).
 notebooks: $(STAMP)

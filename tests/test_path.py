@@ -305,3 +305,26 @@ def test_band_path_single_band_and_bad_input():
         band_path(pos, first="middle")
     with pytest.raises(ConfigError, match="distance"):
         band_path(pos, distance=np.zeros((4, 4)))
+
+
+def test_band_path_equals_brute_force_on_small_bands():
+    from itertools import permutations
+
+    rng = np.random.default_rng(21)
+    for _ in range(3):
+        pos = rng.uniform([0, -1.3, 0.3], [3, -0.8, 2.0], size=(12, 3))
+        home = np.array([0.0, -1.0, 2.2])
+        res = band_path(pos, split_height=1.15, start_position=home)
+        eu = np.linalg.norm(pos[:, None] - pos[None], axis=2)
+        upper, lower = np.flatnonzero(pos[:, 2] >= 1.15), np.flatnonzero(pos[:, 2] < 1.15)
+
+        def best(first, members):
+            rest = [m for m in members if m != first]
+            return min((path_length(eu, [first, *p]), [first, *p]) for p in permutations(rest))
+
+        first = upper[np.argmin(np.linalg.norm(pos[upper] - home, axis=1))]
+        top, top_order = best(first, upper)
+        connection = lower[np.argmin(eu[top_order[-1], lower])]
+        bottom, _ = best(connection, lower)
+        expected = np.linalg.norm(pos[first] - home) + top + eu[top_order[-1], connection] + bottom
+        assert res.optimal and res.length == pytest.approx(expected, abs=1e-12)

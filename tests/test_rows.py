@@ -137,6 +137,23 @@ def test_priors_give_800_candidate_views_each(scene):
         assert np.isin(candidates.position_ids, np.arange(1000)).all()
     with pytest.raises(ConfigError, match="unknown look-at prior"):
         greenhouse.row_candidates(scene, "magic", QUICK)
+    with pytest.raises(ConfigError, match="date"):
+        greenhouse.row_candidates(scene, "authors-transfer", QUICK)
+
+
+def test_the_authors_look_at_files_as_candidates(scene):
+    from dataclasses import replace
+
+    from tpvp.scene.boxes import candidate_look_ats
+
+    dated = replace(scene, date="20250918")
+    for prior, name in greenhouse.AUTHORS_PRIORS.items():
+        table = candidate_look_ats("room1", "20250918", name)
+        candidates = greenhouse.row_candidates(dated, f"authors-{prior}", QUICK)
+        used = np.flatnonzero(np.any(table != 0, axis=1))
+        assert np.array_equal(candidates.position_ids, used)
+        assert np.array_equal(candidates.look_ats, table[used])
+        assert np.array_equal(candidates.targets[candidates.target_ids], candidates.look_ats)
 
 
 # ----------------------------------------------------------------------------- bad input
@@ -221,3 +238,26 @@ def test_blockwise_nbv_and_pose_noise_rows(tmp_path):
     free, off, on = (table7.iloc[i] for i in range(3))
     assert free["precision_10mm_mean"] == pytest.approx(1.0)
     assert off["precision_10mm_mean"] < free["precision_10mm_mean"] and on["chamfer_mm_mean"] < off["chamfer_mm_mean"]
+
+
+def test_handheld_scan_keeps_what_the_aisle_sees_and_drops_what_is_hidden():
+    from tpvp.scene.boxes import room_config
+    from tpvp.synthetic.scan import handheld_scan
+
+    room = room_config("room1")
+    box = room.plant_box
+    aisle = np.sign(box.to_local(room.view_box.center[None])[0, 1])  # the side the aisle is on
+    u, v = np.meshgrid(np.arange(-1.0, 1.0, 0.005), np.arange(-0.6, 0.6, 0.005))
+    wall = np.c_[u.ravel(), np.zeros(u.size), v.ravel()]  # facing the aisle, across the mid-plane
+    a, b = np.meshgrid(np.arange(-0.1, 0.1, 0.01), np.arange(-0.1, 0.1, 0.01))
+    hidden = np.c_[a.ravel(), np.full(a.size, -aisle * 0.2), b.ravel()]  # behind the wall's middle
+    points = box.to_world(np.concatenate([wall, hidden]))
+    kept = handheld_scan(points, room)
+    # the wall is seen from the aisle: every 10 cm patch of it keeps points (a voxelised slanted
+    # plane is partly two voxels thick, and the back voxel of such a pair is hidden, as in a scan)
+    patches = np.unique(np.floor(wall[kept[: len(wall)]][:, [0, 2]] / 0.1), axis=0)
+    assert len(patches) == 20 * 12
+    assert not kept[len(wall):].any()  # what hides behind it is not
+    row = generate_row("room1", 0, 1, point_spacing=0.01).points
+    share = handheld_scan(row, room).mean()
+    assert 0.5 < share < 0.95  # a real scan misses the inside of the canopy

@@ -246,7 +246,7 @@ def _greenhouse(args) -> int:
         previous, current = case.load()
         scene = build_row_scene(previous, current, config, room=case.room, names=(f"{case.name} (previous)",
                                                                                    f"{case.name} (current)"),
-                                cache_dir=args.cache)
+                                cache_dir=args.cache, date=case.date)
         result = run_row_case(scene, config, progress=step)
         step("outputs")
         write_row_case_outputs(stage.folder, scene, result, config, case.name)

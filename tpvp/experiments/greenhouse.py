@@ -29,11 +29,12 @@ from tpvp.scene.boxes import room_config
 from tpvp.sensor.grid import build_grid
 from tpvp.setcover.methods import SelectionProblem, select_views
 from tpvp.viewspace import ViewSpace
-from tpvp.viewspace.lookat import (CandidateViews, box_targets, passive_targets, round_robin_views,
-                                   transfer_targets)
+from tpvp.viewspace.lookat import (CandidateViews, assigned_views, box_targets, passive_targets,
+                                   round_robin_views, transfer_targets)
 from tpvp.visibility import coverage_ratio, covered_voxels, visibility_matrix
 from tpvp.visibility.oracle import greenhouse_oracle
 
+AUTHORS_PRIORS = {"obb": "PriorBBX", "passive": "PriorPassive", "transfer": "PriorTemporal"}
 MIN_INSIDE_PLANT_BOX = 0.5  # a row whose points lie mostly outside its room's plant box is in another frame
 BOX_TOLERANCE = 0.10  # m: leaves may overhang the plant box a little
 
@@ -108,6 +109,7 @@ class RowScene:
     names: tuple = ("previous session", "current session")
     timings: dict = field(default_factory=dict)
     oracle_cached: bool = False
+    date: str | None = None  # YYYYMMDD of the current session, when known
 
     @property
     def passive_seen(self) -> np.ndarray:
@@ -138,9 +140,11 @@ def _check_row(points, name: str, room) -> None:
 
 
 def build_row_scene(previous_points, current_points, config: RowConfig = RowConfig(), room: str | None = None,
-                    names=("previous session", "current session"), cache_dir=None, progress=None) -> RowScene:
+                    names=("previous session", "current session"), cache_dir=None, progress=None,
+                    date: str | None = None) -> RowScene:
     """Both sessions, the current ground truth at ``config.gt_resolution``, its oracle (cached on
-    disk, see :func:`cached_oracle`) and the passive sweep's observation."""
+    disk, see :func:`cached_oracle`) and the passive sweep's observation. ``date`` (YYYYMMDD of the
+    current session) lets the authors' look-at files of that day be used as candidates."""
     room_cfg = room_config(room or config.view_space)
     timings = {}
     t = time.perf_counter()
@@ -167,7 +171,7 @@ def build_row_scene(previous_points, current_points, config: RowConfig = RowConf
     if len(oracle) == 0:
         raise PointCloudError(f"{names[1]}: no voxel of the row is visible from {room_cfg.room}'s view box")
     return RowScene(room_cfg, previous, voxels.voxel_centroids(current, resolution), grid, oracle, passive,
-                    config.sensor, tuple(names), timings, from_cache)
+                    config.sensor, tuple(names), timings, from_cache, date)
 
 
 @dataclass(frozen=True, eq=False)
@@ -204,9 +208,18 @@ def row_candidates(scene: RowScene, prior: str, config: RowConfig = RowConfig(),
 
     ``obb`` uses the room's own targets (the authors' Poisson-disk sample) when it has 100 of
     them, ``passive`` the surface frontiers of the passive reconstruction, ``transfer`` the
-    transferred surface the passive sweep missed (needs ``transferred``)."""
+    transferred surface the passive sweep missed (needs ``transferred``); ``authors-<prior>`` reads
+    the authors' own assignment of that prior for the scene's date (bundled ``gap_1`` files, made
+    on the real rows)."""
     room, targets_config, seed = scene.room, config.targets, config.seed
     voxel = config.inflation.step
+    if prior.startswith("authors-") and prior[len("authors-"):] in AUTHORS_PRIORS:
+        from tpvp.scene.boxes import candidate_look_ats
+
+        if scene.date is None:
+            raise ConfigError(f"the {prior} candidates need the session's date (build_row_scene(..., date=))")
+        table = candidate_look_ats(room.room, scene.date, AUTHORS_PRIORS[prior[len("authors-"):]], room.folder)
+        return assigned_views(room.candidate_positions, table, prior)
     if prior == "obb":
         targets = (np.asarray(room.rand_look_at_points) if len(room.rand_look_at_points) == targets_config.count
                    else box_targets(room.plant_box, targets_config.count, seed))
@@ -219,7 +232,8 @@ def row_candidates(scene: RowScene, prior: str, config: RowConfig = RowConfig(),
         targets = transfer_targets(transferred.alignment.warped, transferred.coarse,
                                    transferred.inflation.inflation, voxel, targets_config.count, seed)
     else:
-        raise ConfigError(f"unknown look-at prior {prior!r}; choose one of obb, passive, transfer")
+        raise ConfigError(f"unknown look-at prior {prior!r}; choose one of obb, passive, transfer, "
+                          f"authors-obb, authors-passive, authors-transfer")
     return round_robin_views(targets, room.candidate_positions, targets_config.rounds, seed, prior)
 
 

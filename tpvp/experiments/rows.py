@@ -61,6 +61,7 @@ class RowCase:
     seed: int = 0
     files: tuple = ()  # (previous file, current file) of a dataset; empty for a generated row
     point_spacing: float = 0.004
+    scanned: bool = True  # a generated row as a handheld scan would have captured it (tpvp.synthetic.scan)
 
     @property
     def source(self) -> str:
@@ -75,6 +76,16 @@ class RowCase:
     def labels(self) -> dict:
         return {"source": self.source, "room": self.room, "case": self.name, "previous_session": self.previous}
 
+    @property
+    def date(self) -> str | None:
+        """YYYYMMDD of the current session (a generated session k stands for the dataset's k-th date)."""
+        if self.files:
+            match = SESSION_FILE.match(Path(self.files[1]).name)
+            return match["date"] if match else None
+        from tpvp.synthetic.greenhouse import DATES
+
+        return DATES[self.previous + 1]
+
     def load(self) -> tuple[np.ndarray, np.ndarray]:
         if self.files:
             from tpvp.io import read_point_cloud
@@ -83,7 +94,13 @@ class RowCase:
         from tpvp.synthetic.greenhouse import generate_row_sessions
 
         sessions = generate_row_sessions(self.room, self.seed, self.previous + 2, self.point_spacing)
-        return sessions[self.previous].points, sessions[self.previous + 1].points
+        pair = sessions[self.previous].points, sessions[self.previous + 1].points
+        if not self.scanned:
+            return pair
+        from tpvp.scene.boxes import room_config
+        from tpvp.synthetic.scan import handheld_scan
+
+        return tuple(points[handheld_scan(points, room_config(self.room))] for points in pair)
 
 
 def dataset_cases(folder, rooms=ROOMS) -> list[RowCase]:
@@ -240,6 +257,18 @@ def pose_noise(scene, config, settings):
             for row in table.to_dict(orient="records")]
 
 
+@ROW_METHODS.register("upper-limit-authors", "Table V with the authors' own look-at files (gap_1) of the same date")
+def upper_limit_authors(scene, config, settings):
+    from tpvp.experiments.greenhouse import AUTHORS_PRIORS, upper_limit
+
+    rows = []
+    for prior in AUTHORS_PRIORS:
+        candidates, truth, seconds = _candidates(scene, f"authors-{prior}", config)
+        rows.append({"prior": f"authors-{prior}", "coverage": upper_limit(scene, truth), "views": len(candidates),
+                     "seconds_candidates": seconds})
+    return rows
+
+
 ALL_METHODS = ("coarse", "blockwise-nbv", "ours", "prior-obb-random", "prior-passive-random", "prior-transfer-random",
                "upper-limit")
 
@@ -262,7 +291,7 @@ def _scene(case: RowCase, config: RowConfig, oracle_cache):
     previous, current = case.load()
     return build_row_scene(previous, current, config, room=case.room, names=(f"{case.name} (previous)",
                                                                               f"{case.name} (current)"),
-                           cache_dir=oracle_cache)
+                           cache_dir=oracle_cache, date=case.date)
 
 
 def run_row_task(case: RowCase, method: str, config: RowConfig, settings: RowSettings, cache_dir=None) -> pd.DataFrame:
@@ -340,11 +369,12 @@ def tables(raw: pd.DataFrame) -> dict:
         if column not in raw:
             raw[column] = np.nan
     paper = paper_values()
-    upper = _mean_std(raw[raw["method"] == "upper-limit"], ["source", "prior"], columns=("coverage",))
+    upper = _mean_std(raw[raw["method"].isin(["upper-limit", "upper-limit-authors"])], ["source", "prior"],
+                      columns=("coverage", "views"))
     upper = upper.merge(paper[paper["table"] == "V"][["prior", "coverage_mean", "coverage_std"]]
                         .rename(columns={"coverage_mean": "paper_coverage_mean", "coverage_std": "paper_coverage_std"}),
                         on="prior", how="left")
-    main = raw[raw["method"] != "upper-limit"].copy()
+    main = raw[~raw["method"].isin(["upper-limit", "upper-limit-authors"])].copy()
     keys = ["source", "method", "budget", "cover_resolution_cm"]
     # Repetitions of a random baseline: one value per case first, then mean ± std across cases.
     per_case = main.groupby(keys + ["case"], dropna=False, sort=False)[["views", "coverage", "path_length_m"]] \

@@ -74,7 +74,6 @@ mapped. Rays use the exact DDA of :mod:`tpvp.sensor.raycast` through :func:`tpvp
 
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import dataclass
 
@@ -89,6 +88,7 @@ from tpvp.scene.boxes import OrientedBox, RoomConfig, room_config
 from tpvp.sensor.camera import look_at_rotation
 from tpvp.sensor.grid import OccupancyGrid
 from tpvp.sensor.sensor import SensorConfig, observe_many
+from tpvp.viewspace import lookat
 
 NOT_SEEN = np.iinfo(np.int32).max  # first_seen of a voxel that no view observed
 START = -1  # first_seen of a voxel observed by a start view
@@ -333,19 +333,12 @@ def look_at_rotations_fast(positions, look_ats) -> np.ndarray:
 
 
 def farthest_point_sampling(points, k: int, rng) -> np.ndarray:
-    """Indices of ``k`` points (all when fewer) by farthest-point sampling from a random first one."""
+    """Indices of ``k`` points (all when fewer) by farthest-point sampling from a random first one
+    (:func:`tpvp.viewspace.lookat.farthest_point_sampling` with this run's generator)."""
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-    n = len(points)
-    k = min(int(k), n)
-    if k <= 0:
+    if int(k) <= 0 or len(points) == 0:
         return np.zeros(0, dtype=np.int64)
-    chosen = np.empty(k, dtype=np.int64)
-    chosen[0] = rng.integers(n)
-    d2 = ((points - points[chosen[0]]) ** 2).sum(axis=1)
-    for i in range(1, k):
-        chosen[i] = int(np.argmax(d2))
-        d2 = np.minimum(d2, ((points - points[chosen[i]]) ** 2).sum(axis=1))
-    return chosen
+    return lookat.farthest_point_sampling(points, int(k), rng)
 
 
 def round_robin_pairing(positions, targets, rng) -> np.ndarray:
@@ -359,6 +352,11 @@ def round_robin_pairing(positions, targets, rng) -> np.ndarray:
     assigned = np.full(n, -1, dtype=np.int64)
     if n == 0:
         return assigned
+    if m == 0:
+        raise ConfigError("round robin pairing needs at least one target")
+    views = lookat.round_robin_views(targets, positions, rounds=-(-n // m), seed=rng)
+    assigned[views.position_ids] = views.target_ids
+    return assigned
     if m == 0:
         raise ConfigError("round robin pairing needs at least one target")
     d2 = ((positions[:, None, :] - targets[None, :, :]) ** 2).sum(axis=2)

@@ -171,3 +171,15 @@ def round_robin_views(targets, positions, rounds: int = 8, seed: int = 0, prior:
     position_ids = np.asarray(chosen_positions, dtype=np.int64)
     target_ids = np.asarray(chosen_targets, dtype=np.int64)
     return CandidateViews(prior, targets, positions[position_ids], targets[target_ids], position_ids, target_ids)
+
+
+def assigned_views(positions, look_ats, prior: str = "") -> CandidateViews:
+    """Candidate views from a per-position look-at table (``(P, 3)``, an all-zero row marks an
+    unused position), e.g. the authors' ``gap_1`` files (:func:`tpvp.scene.boxes.candidate_look_ats`)."""
+    positions = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
+    look_ats = np.asarray(look_ats, dtype=np.float64).reshape(-1, 3)
+    if len(positions) != len(look_ats):
+        raise ConfigError(f"{len(look_ats)} look-ats for {len(positions)} positions")
+    used = np.flatnonzero(np.any(look_ats != 0, axis=1))
+    targets, target_ids = np.unique(look_ats[used], axis=0, return_inverse=True)
+    return CandidateViews(prior, targets, positions[used], look_ats[used], used, target_ids.reshape(-1))
