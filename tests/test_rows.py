@@ -236,7 +236,9 @@ def test_blockwise_nbv_and_pose_noise_rows(tmp_path):
     table7 = rows.tables(raw)["table7_pose_noise"]
     assert len(table7) == 3  # noise-free, noisy without ICP, noisy with ICP
     free, off, on = (table7.iloc[i] for i in range(3))
-    assert free["precision_10mm_mean"] == pytest.approx(1.0)
+    # every fused point is a 2 cm voxel centre, at most half a voxel diagonal (1.73 cm) from the
+    # centroid of the surface points in its voxel
+    assert free["precision_20mm_mean"] == pytest.approx(1.0)
     assert off["precision_10mm_mean"] < free["precision_10mm_mean"] and on["chamfer_mm_mean"] < off["chamfer_mm_mean"]
 
 
