@@ -263,3 +263,15 @@ def test_handheld_scan_keeps_what_the_aisle_sees_and_drops_what_is_hidden():
     row = generate_row("room1", 0, 1, point_spacing=0.01).points
     share = handheld_scan(row, room).mean()
     assert 0.5 < share < 0.95  # a real scan misses the inside of the canopy
+
+
+def test_experiments_rows_cli_quick(tmp_path, capsys):
+    out = tmp_path / "tables"
+    assert main(["experiments", "rows", "--quick", "--methods", "coarse", "--rooms", "room4", "--workers", "1",
+                 "--cache", str(tmp_path / "cache"), "--output", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "1 cases x 1 methods" in printed and "| generated | coarse |" in printed
+    raw = pd.read_csv(out / "raw_cases.csv")
+    assert raw["room"].tolist() == ["room4"] and raw["views"].tolist() == [15]
+    for name in ("table6_coverage_effort.md", "paper_values.csv", "paper_pose_noise.csv", "config.yaml"):
+        assert (out / name).stat().st_size > 0
