@@ -9,7 +9,7 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 OUT ?= outputs
 
-.PHONY: demo test bench notebooks system-deps clean
+.PHONY: demo test bench notebooks learning system-deps clean
 
 $(STAMP): environment.txt pyproject.toml
 	@$(MAKE) --no-print-directory system-deps
@@ -51,10 +51,16 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/row_case_bench.py
 	$(BIN)/python benchmarks/row_registration_bench.py
 	$(BIN)/python benchmarks/blockwise_nbv_bench.py
+	$(BIN)/python benchmarks/learned_inference_bench.py
 
 # Every notebook in full mode (the paper's protocol); CI runs them in quick mode (make test).
 notebooks: $(STAMP)
 	$(BIN)/python -m tpvp.experiments.notebooks --output $(OUT)/notebooks
+
+# Regenerate the learned planners' dataset and retrain both networks from scratch (~55 min on 2 cores);
+# the shipped weights stay in tpvp/data/learning unless OUT points there.
+learning: $(STAMP)
+	$(BIN)/python -m tpvp.learning all --out $(OUT)/learning
 
 clean:
 	rm -rf $(VENV) $(OUT) .pytest_cache

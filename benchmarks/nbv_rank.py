@@ -49,26 +49,9 @@ from scipy import sparse
 
 from tpvp.config import make_config
 from tpvp.experiments import plants
-from tpvp.experiments.single_plant import build_scene
+from tpvp.experiments.single_plant import added_coverage, build_scene, rank_of
 from tpvp.jit import compile_kernels
 from tpvp.nbv.methods import NBV_METHODS, NbvContext, make_nbv
-
-
-def added_coverage(scene, executed) -> np.ndarray:
-    """Per view: the oracle voxels it sees that none of ``executed`` sees (``(V,)`` int)."""
-    truth = sparse.csr_matrix(scene.truth_visibility)
-    new = np.zeros(truth.shape[1], dtype=bool)
-    new[scene.oracle] = True
-    for v in executed:
-        new[truth.indices[truth.indptr[v]:truth.indptr[v + 1]]] = False
-    return np.asarray(truth @ new.astype(np.int64)).ravel()
-
-
-def rank_of(added: np.ndarray, executed, view: int) -> int:
-    """1 + the number of non-executed candidates that add strictly more than ``view``."""
-    candidates = np.ones(len(added), dtype=bool)
-    candidates[list(executed)] = False
-    return 1 + int((added[candidates] > added[view]).sum())
 
 
 def run_cases(cases, methods, base) -> pd.DataFrame:

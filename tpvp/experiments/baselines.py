@@ -44,6 +44,7 @@ from scipy import sparse
 from tpvp.config import PlantConfig
 from tpvp.errors import ConfigError
 from tpvp.nbv.methods import NbvContext, make_nbv
+from tpvp.experiments.single_plant import observation
 from tpvp.path.local import local_path_lengths, obstacle_radius
 from tpvp.path.tsp import shortest_open_path
 from tpvp.setcover.ilp import solve_set_cover
@@ -79,10 +80,6 @@ def _check_targets(targets) -> tuple:
     return tuple(out)
 
 
-def _observation(scene, view: int) -> np.ndarray:
-    return scene.grid.centres[scene.truth_visibility[view].indices]
-
-
 def nbv_curve(scene, config: PlantConfig = PlantConfig(), max_views: int = 20) -> pd.DataFrame:
     """Sequential NBV from ``config.initial_view`` for up to ``max_views`` views (initial included).
 
@@ -114,7 +111,7 @@ def nbv_curve(scene, config: PlantConfig = PlantConfig(), max_views: int = 20) -
     for n in range(1, n_steps + 1):
         t = time.perf_counter()
         view = initial if n == 1 else int(nbv.next_view().view)
-        points = _observation(scene, view)
+        points = observation(scene, view)
         nbv.integrate(view, points)
         seconds = time.perf_counter() - t
         if previous is None:

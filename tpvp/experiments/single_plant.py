@@ -159,8 +159,28 @@ def build_scene(previous_points, current_points, config: PlantConfig = PlantConf
                  current.table_points, names, reduction)
 
 
-def _observation(scene: Scene, view: int) -> np.ndarray:
+def observation(scene: Scene, view: int) -> np.ndarray:
+    """What ``view`` observes of the current plant: the centres of the ground-truth voxels it sees."""
     return scene.grid.centres[scene.truth_visibility[view].indices]
+
+
+def added_coverage(scene, executed) -> np.ndarray:
+    """Per view: the oracle voxels it sees that none of ``executed`` sees (``(V,)`` int)."""
+    from scipy import sparse
+
+    truth = sparse.csr_matrix(scene.truth_visibility)
+    new = np.zeros(truth.shape[1], dtype=bool)
+    new[scene.oracle] = True
+    for v in executed:
+        new[truth.indices[truth.indptr[v]:truth.indptr[v + 1]]] = False
+    return np.asarray(truth @ new.astype(np.int64)).ravel()
+
+
+def rank_of(added: np.ndarray, executed, view: int) -> int:
+    """1 + the number of non-executed candidates that add strictly more than ``view``."""
+    candidates = np.ones(len(added), dtype=bool)
+    candidates[list(executed)] = False
+    return 1 + int((added[candidates] > added[view]).sum())
 
 
 @dataclass(frozen=True, eq=False)
@@ -186,10 +206,10 @@ def transfer(scene: Scene, config: PlantConfig = PlantConfig(), progress=None) -
     t = time.perf_counter()
     say("warm-up NBV")
     nbv = make_nbv(NbvContext(space, np.zeros(3), scene.sensor, config.nbv, prior=scene.previous))
-    nbv.integrate(initial, _observation(scene, initial))
+    nbv.integrate(initial, observation(scene, initial))
     for _ in range(config.nbv.warm_up_views):
         choice = nbv.next_view()
-        nbv.integrate(choice.view, _observation(scene, choice.view))
+        nbv.integrate(choice.view, observation(scene, choice.view))
     coarse = np.concatenate(nbv.observations)
     timings["warm_up"] = time.perf_counter() - t
 
@@ -236,13 +256,7 @@ def run_case(scene: Scene, config: PlantConfig = PlantConfig(), progress=None,
 
     t = time.perf_counter()
     say("path")
-    radius = obstacle_radius(coarse, centre)
-    stops = [executed[-1], *selection.selected]
-    tsp = shortest_open_path(local_path_lengths(space.positions[stops], centre, radius), start=0,
-                             config=config.path)
-    planned = [int(stops[i]) for i in tsp.order[1:]]
-    warm_up_path = float(np.trace(local_path_lengths(space.positions[executed], centre, radius), offset=1)) \
-        if len(executed) > 1 else 0.0
+    planned, path_length, tsp, radius = path_through(space, executed, selection.selected, coarse, config)
     timings["path"] = time.perf_counter() - t
     timings["planning"] = sum(timings[k] for k in ("inflation", "visibility", "selection", "path"))
 
@@ -250,13 +264,27 @@ def run_case(scene: Scene, config: PlantConfig = PlantConfig(), progress=None,
         executed_views=executed, planned_views=planned,
         coverage=coverage_ratio(covered_voxels(scene.truth_visibility, executed + planned), scene.oracle),
         coverage_warm_up=coverage_ratio(covered_voxels(scene.truth_visibility, executed), scene.oracle),
-        n_views=len(executed) + len(planned), path_length=warm_up_path + tsp.length,
+        n_views=len(executed) + len(planned), path_length=path_length,
         chamfer_before=alignment.chamfer_before, chamfer_after=alignment.chamfer_after,
         selection=selection, tsp=tsp, timings=timings,
         clouds={"coarse": np.unique(coarse, axis=0), "previous": scene.previous,
                 "warped": alignment.warped, "inflation": inflated.inflation, "planning": inflated.planning},
         obstacle=(centre, radius), warnings=warnings, planning_target=problem.coverage_target,
     )
+
+
+def path_through(space, executed, selected, coarse, config: PlantConfig):
+    """The executed views' path, then the shortest open path from the last one through ``selected``;
+    the obstacle sphere is sized on the coarse reconstruction. Returns (planned views in order,
+    whole path length, the TSP result, obstacle radius)."""
+    centre = np.zeros(3)
+    radius = obstacle_radius(coarse, centre)
+    stops = [executed[-1], *selected]
+    tsp = shortest_open_path(local_path_lengths(space.positions[stops], centre, radius), start=0, config=config.path)
+    planned = [int(stops[i]) for i in tsp.order[1:]]
+    warm_up_path = float(np.trace(local_path_lengths(space.positions[executed], centre, radius), offset=1)) \
+        if len(executed) > 1 else 0.0
+    return planned, warm_up_path + tsp.length, tsp, radius
 
 
 def _registration_warnings(scene: Scene, alignment, config: PlantConfig) -> list:

@@ -9,8 +9,8 @@ Interface (sized for sequential and learned methods, not only the one-shot warm-
 
 A new NBV method is one class with these two methods plus one ``@NBV_METHODS.register`` line.
 
-Registered: ``geometric`` (information gain on an occupancy map of what was observed; the default)
-and ``prior`` (:mod:`tpvp.nbv.prior`: the previous session's voxels that a view would observe and
+Registered: ``geometric`` (information gain on an occupancy map of what was observed; the default),
+``pc-nbv`` (the learned gain network of :mod:`tpvp.learning`) and ``prior`` (:mod:`tpvp.nbv.prior`: the previous session's voxels that a view would observe and
 no executed view did; needs ``NbvContext.prior``).
 """
 
@@ -49,7 +49,27 @@ class NbvChoice:
     scores: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
 
-class GeometricNbv:
+class ObservedViews:
+    """What every NBV method keeps: the executed views, in order, and the points each observed."""
+
+    def __init__(self, context: NbvContext):
+        self.context = context
+        self.executed: list[int] = []
+        self.observations: list[np.ndarray] = []
+
+    @property
+    def view_state(self) -> np.ndarray:
+        """Boolean mask of the executed views (the input learned methods take beside the map)."""
+        state = np.zeros(len(self.context.view_space), dtype=bool)
+        state[self.executed] = True
+        return state
+
+    def integrate(self, view: int, points: np.ndarray) -> None:
+        self.executed.append(int(view))
+        self.observations.append(np.asarray(points, dtype=np.float64).reshape(-1, 3))
+
+
+class GeometricNbv(ObservedViews):
     """Information gain on an occupancy map of what was observed: unknown voxels reached by a
     view's pixel rays (every ``pixel_stride``-th pixel), free space carved along the executed
     views' pixel rays; the paper's warm-up NBV in this library (docs/sensor.md#information-gain).
@@ -62,25 +82,12 @@ class GeometricNbv:
     """
 
     def __init__(self, context: NbvContext, incremental: bool = True):
-        self.context = context
+        super().__init__(context)
         self.incremental = bool(incremental)
-        self.executed: list[int] = []
-        self.observations: list[np.ndarray] = []
         self._radii: list[float] = []  # per view (once mapped): farthest observed point from the centre
         self._occupancy: OccupancyMap | None = None
         self._radius = 0.0  # the radius that _occupancy is sized on
         self._integrated = 0  # views in _occupancy
-
-    @property
-    def view_state(self) -> np.ndarray:
-        """Boolean mask of the executed views (the input learned methods take beside the map)."""
-        state = np.zeros(len(self.context.view_space), dtype=bool)
-        state[self.executed] = True
-        return state
-
-    def integrate(self, view: int, points: np.ndarray) -> None:
-        self.executed.append(int(view))
-        self.observations.append(np.asarray(points, dtype=np.float64).reshape(-1, 3))
 
     @property
     def occupancy(self) -> OccupancyMap:
@@ -116,6 +123,13 @@ class GeometricNbv:
 
 
 NBV_METHODS.register("geometric")(GeometricNbv)
+
+
+@NBV_METHODS.register("pc-nbv", "PC-NBV-style learned NBV on the 32 hemisphere views (tpvp.learning)")
+def pc_nbv(context: NbvContext):
+    from tpvp.learning.planners import PcNbv  # torch is imported only when the method is used
+
+    return PcNbv(context)
 
 
 def make_nbv(context: NbvContext):

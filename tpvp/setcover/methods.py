@@ -81,6 +81,15 @@ def set_cover(problem: SelectionProblem, config) -> Selection:
     return Selection(result.selected, result.optimal, status, time.perf_counter() - t0, result)
 
 
+@SELECTION_METHODS.register("ma-scvp")
+def ma_scvp(problem: SelectionProblem, config) -> Selection:
+    """MA-SCVP-style learned view set from what the executed views observed (tpvp.learning; ignores
+    the planning surface)."""
+    from tpvp.learning.planners import ma_scvp_selection  # torch is imported only when the method is used
+
+    return ma_scvp_selection(problem, config)
+
+
 def select_views(problem: SelectionProblem, config) -> Selection:
     """Run the selection method named by ``config.method``."""
     return SELECTION_METHODS.get(config.method)(problem, config)

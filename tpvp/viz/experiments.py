@@ -10,6 +10,7 @@ from tpvp.viz.figures import _save, plt
 
 _STYLE = {"ours": ("tab:red", "o"), "ours-no-inflation": ("tab:orange", "s"), "initial-view-only": ("tab:brown", "v"),
           "initial-view-only-no-inflation": ("tab:pink", "^"), "one-shot-no-prior": ("tab:gray", "D"),
+          "ma-scvp": ("tab:green", "P"), "ma-scvp-oracle": ("tab:olive", "X"), "ours-pc-nbv": ("tab:purple", "h"),
           "optimum": ("black", "*")}
 
 
