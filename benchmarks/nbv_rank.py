@@ -45,7 +45,6 @@ except ImportError:  # not installed: run from a checkout
 
 import numba
 import pandas as pd
-from scipy import sparse
 
 from tpvp.config import make_config
 from tpvp.experiments import plants

@@ -183,6 +183,19 @@ def rank_of(added: np.ndarray, executed, view: int) -> int:
     return 1 + int((added[candidates] > added[view]).sum())
 
 
+def warm_up(scene: Scene, config: PlantConfig):
+    """The initial view and ``config.nbv.warm_up_views`` NBVs executed: the NBV method, holding
+    the executed views and their observations."""
+    space = scene.view_space
+    initial = space.view_index(config.initial_view)
+    nbv = make_nbv(NbvContext(space, np.zeros(3), scene.sensor, config.nbv, prior=scene.previous))
+    nbv.integrate(initial, observation(scene, initial))
+    for _ in range(config.nbv.warm_up_views):
+        choice = nbv.next_view()
+        nbv.integrate(choice.view, observation(scene, choice.view))
+    return nbv
+
+
 @dataclass(frozen=True, eq=False)
 class Transfer:
     """What the robot knows before planning: the executed views (initial + warm-up NBVs), their
@@ -200,16 +213,9 @@ def transfer(scene: Scene, config: PlantConfig = PlantConfig(), progress=None) -
     """Initial view, warm-up NBVs and registration of the previous session onto what they saw."""
     say = progress or (lambda stage: None)
     timings = {}
-    space = scene.view_space
-    initial = space.view_index(config.initial_view)
-
     t = time.perf_counter()
     say("warm-up NBV")
-    nbv = make_nbv(NbvContext(space, np.zeros(3), scene.sensor, config.nbv, prior=scene.previous))
-    nbv.integrate(initial, observation(scene, initial))
-    for _ in range(config.nbv.warm_up_views):
-        choice = nbv.next_view()
-        nbv.integrate(choice.view, observation(scene, choice.view))
+    nbv = warm_up(scene, config)
     coarse = np.concatenate(nbv.observations)
     timings["warm_up"] = time.perf_counter() - t
 

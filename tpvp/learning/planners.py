@@ -123,8 +123,7 @@ def oracle_selection(scene, executed):
 def learned_one_shot(scene, config, labels: str = "network") -> dict:
     """The MA-SCVP system on a simulator scene (``config.nbv`` chooses the warm-up NBV; the paper's
     system uses one ``pc-nbv`` view). Returns one result row."""
-    from tpvp.experiments.single_plant import observation, path_through
-    from tpvp.nbv.methods import NbvContext, make_nbv
+    from tpvp.experiments.single_plant import path_through, warm_up
     from tpvp.setcover.methods import SelectionProblem
     from tpvp.visibility import coverage_ratio, covered_voxels
 
@@ -133,11 +132,7 @@ def learned_one_shot(scene, config, labels: str = "network") -> dict:
     space = scene.view_space
     learned_views(space)
     t0 = time.perf_counter()
-    nbv = make_nbv(NbvContext(space, np.zeros(3), scene.sensor, config.nbv, prior=scene.previous))
-    nbv.integrate(space.view_index(config.initial_view), observation(scene, space.view_index(config.initial_view)))
-    for _ in range(config.nbv.warm_up_views):
-        choice = nbv.next_view()
-        nbv.integrate(choice.view, observation(scene, choice.view))
+    nbv = warm_up(scene, config)
     executed = list(nbv.executed)
     warm_up_seconds = time.perf_counter() - t0
     t0 = time.perf_counter()
