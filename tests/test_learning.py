@@ -305,3 +305,10 @@ def test_pc_nbv_never_repeats_or_leaves_the_hemisphere():
     curve = nbv_curve(scene, case.config(config), max_views=8)
     assert curve["view"].is_unique and (curve["view"] < 32).all()
     assert curve["coverage"].is_monotonic_increasing
+
+
+def test_cli_names_a_missing_dataset(tmp_path, capsys):
+    from tpvp.learning.__main__ import main
+
+    assert main(["train", "--data", str(tmp_path / "nowhere"), "--out", str(tmp_path / "out"), "--no-progress"]) == 2
+    assert "nowhere: no manifest.json" in capsys.readouterr().err
