@@ -171,7 +171,7 @@ def sample_cloud(points: np.ndarray, count: int, rng) -> np.ndarray:
 
 def rendered_views(points, rotation_deg: float):
     """The simulator's scene of one plant (hemisphere, paper configuration) rotated about the vertical:
-    (view positions, per-view observed plant points, sparse visibility restricted to the visible voxels)."""
+    (view positions, per-view observed plant points, bool (views, visible voxels): what each view sees)."""
     from tpvp.config import make_config
     from tpvp.experiments.single_plant import build_scene, observation
 
@@ -179,12 +179,14 @@ def rendered_views(points, rotation_deg: float):
     # No previous session is involved: the current plant stands in for it.
     scene = build_scene(points, points, config)
     observations = [observation(scene, v) for v in range(len(scene.view_space))]
-    return scene.view_space.positions, observations, scene.truth_visibility[:, scene.oracle].tocsr()
+    return scene.view_space.positions, observations, scene.truth_visibility[:, scene.oracle].toarray().astype(bool)
 
 
-def state_sample(positions, observations, visible, states, cloud_points: int, rng) -> dict:
+def state_sample(positions, observations, seen, states, cloud_points: int, rng) -> dict:
     """Inputs and targets of ``states`` (ordered view lists) of one rendered plant."""
-    seen = visible.toarray().astype(bool)
+    from scipy import sparse
+
+    visible = sparse.csr_matrix(seen)
     n = len(states)
     out = {"grids": np.zeros((n, CELLS, CELLS, CELLS), np.float16), "states": np.zeros((n, VIEWS), bool),
            "orders": np.full((n, VIEWS), -1, np.int8), "labels": np.zeros((n, VIEWS), bool),
@@ -211,10 +213,9 @@ def plant_samples(plant: tuple, split: str, config: DatasetConfig) -> list[dict]
     for r in range(rotations):
         rotation = 360.0 * r / config.rotations
         rng = np.random.default_rng([config.seed, seed, r, config.species.index(species)])
-        positions, observations, visible = rendered_views(points, rotation)
-        seen = visible.toarray().astype(bool)
+        positions, observations, seen = rendered_views(points, rotation)
         states = long_tail_states(seen, config.n1, rng)
-        sample = state_sample(positions, observations, visible, states, config.cloud_points, rng)
+        sample = state_sample(positions, observations, seen, states, config.cloud_points, rng)
         sample["index"] = pd.DataFrame({"split": split, "species": species, "seed": seed, "rotation_deg": rotation,
                                         "size": [len(s) for s in states], "label_size": sample["labels"].sum(1),
                                         "label_optimal": sample.pop("optimal"),

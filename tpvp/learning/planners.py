@@ -108,12 +108,11 @@ def oracle_selection(scene, executed):
 
     from tpvp.setcover.ilp import SetCoverConfig, solve_set_cover
     from tpvp.setcover.methods import Selection
+    from tpvp.visibility import covered_voxels
 
     t0 = time.perf_counter()
     truth = sparse.csr_matrix(scene.truth_visibility)
-    seen = np.zeros(truth.shape[1], dtype=bool)
-    seen[truth[list(executed)].indices] = True
-    remaining = scene.oracle[~seen[scene.oracle]]
+    remaining = np.setdiff1d(scene.oracle, covered_voxels(truth, executed))
     result = solve_set_cover(truth[:VIEWS][:, remaining], executed=[v for v in executed if v < VIEWS],
                              config=SetCoverConfig(solver="highs"))
     return Selection(np.asarray(result.selected), result.optimal, f"oracle label: {result.status}",
