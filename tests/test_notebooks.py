@@ -1,34 +1,68 @@
-"""Every notebook runs unattended in quick mode and is stored without outputs."""
+"""Every notebook runs unattended in reader's mode, shows what it makes, and is stored clean.
+
+The executions go through :func:`tpvp.experiments.notebooks.run_notebooks`, the path ``make
+notebooks`` takes, into one folder per test session (``executed_notebooks``), which the site test
+(tests/test_site.py) then renders: all of them run on one xdist worker (group ``notebooks``), in
+file order.
+"""
 
 import json
+import re
 
+import nbformat
 import pytest
 
-from tpvp.experiments.notebooks import notebook_paths, run_notebook
+from tpvp.experiments.notebooks import notebook_paths, run_notebooks, set_parameters
 
 NOTEBOOKS = notebook_paths()
+LOCAL_PATH = re.compile(r"(/work/|/home/|/tmp/|/root/|[A-Z]:\\\\)")
+# a printed file path standing in for a figure or a table
+PRINTED_FILE = re.compile(r"[\w./-]+\.(png|pdf|svg|csv)\b")
 
 
 def test_there_is_a_notebook_per_experiment():
     names = [p.stem for p in NOTEBOOKS]
     assert names == ["01_getting_started", "02_table1_coverage_effort", "03_table2_plant_complexity",
                      "04_ablations_tables3_4", "05_greenhouse_rows_tables5_6", "06_pose_noise_table7",
-                     "07_planning_time", "08_learned_baselines"]
+                     "07_planning_time", "08_learned_baselines", "09_prepare_datasets"]
 
 
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=[p.stem for p in NOTEBOOKS])
-def test_stored_without_outputs(path):
+def test_stored_without_outputs_or_local_paths(path):
     notebook = json.loads(path.read_text())
     for cell in notebook["cells"]:
         if cell["cell_type"] == "code":
             assert cell["outputs"] == [] and cell["execution_count"] is None, path.name
-    first = next(c for c in notebook["cells"] if c["cell_type"] == "code")
-    assert "quick = " in "".join(first["source"])
+        assert not LOCAL_PATH.search("".join(cell["source"])), f"{path.name} holds a local path"
+    first = "".join(next(c for c in notebook["cells"] if c["cell_type"] == "code")["source"])
+    # the parameters cell: the switch, what each mode costs, where the outputs go
+    assert re.search(r"^full = False\s+#.*\bmin", first, re.M), first
+    assert re.search(r"^output = \"\.\./outputs/reader/", first, re.M), first
+
+
+def test_set_parameters_keeps_the_comments():
+    notebook = nbformat.v4.new_notebook(cells=[nbformat.v4.new_code_cell(
+        'full = False  # reader: 1 min; full: 10 min\noutput = "../outputs/reader/x"  # here')])
+    set_parameters(notebook, True, "/somewhere/else")
+    assert notebook.cells[0].source == ("full = True  # reader: 1 min; full: 10 min\n"
+                                        "output = '/somewhere/else'  # here")
 
 
 @pytest.mark.slow
+@pytest.mark.xdist_group("notebooks")
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=[p.stem for p in NOTEBOOKS])
-def test_runs_in_quick_mode(path, tmp_path):
-    run_notebook(path, quick=True, output=tmp_path, timeout=600)
-    written = [p for p in tmp_path.rglob("*") if p.is_file() and p.suffix in (".png", ".csv")]
-    assert written, f"{path.name} wrote no figure or table"
+def test_runs_in_reader_mode_and_shows_its_figures_and_tables(path, executed_notebooks):
+    entry = run_notebooks([path.stem], full=False, destination=executed_notebooks, progress=False)[path.stem]
+    assert entry["errors"] == 0
+    assert entry["images"] >= 1, f"{path.name} shows no figure"
+    assert entry["tables"] >= 1, f"{path.name} shows no rendered table"
+    executed = nbformat.read(executed_notebooks / f"{path.stem}.ipynb", as_version=4)
+    for cell in executed.cells:
+        for out in cell.get("outputs", []):
+            text = out.get("text", "") + out.get("data", {}).get("text/plain", "")
+            assert not PRINTED_FILE.search(text), f"{path.name} prints a file path instead of showing it: {text[:200]}"
+    assert (executed_notebooks / f"{path.stem}.html").stat().st_size > 0
+    exported = [p for p in (executed_notebooks / path.stem).rglob("*") if p.suffix in (".png", ".csv")]
+    assert exported, f"{path.name} exported no figure or table file"
+    manifest = json.loads((executed_notebooks / "manifest.json").read_text())
+    assert manifest[path.stem]["mode"] == "reader"

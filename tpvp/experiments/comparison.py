@@ -124,4 +124,21 @@ def write_comparison_files(folder, scene: Scene, config: PlantConfig, views: int
         cameras={f"{p.method}_views": (space.positions[p.order], space.look_ats[p.order]) for p in plans},
         paths={f"{p.method}_path": p.polyline for p in plans},
         path_colours={f"{p.method}_path": colours[p.method] for p in plans})
-    return {"table": table, "figure": figure, "recording": recording}
+    return {"table": table, "figure": figure, "recording": recording, "plans": plans}
+
+
+def comparison_3d(scene: Scene, plan: ComparedPlan, title: str = ""):
+    """An interactive (plotly) view of one compared plan: the plant voxels it covered (blue) and
+    the observable ones it missed (red), its views in execution order and its path."""
+    from tpvp.viz.interactive import scene_3d
+
+    plant = scene.grid.countable
+    observable = np.zeros(scene.grid.size, bool)
+    observable[scene.oracle] = True
+    centres, space = scene.grid.centres, scene.view_space
+    return scene_3d({"covered voxels": (centres[plant & plan.covered], "royalblue"),
+                     "missed voxels (observable)": (centres[plant & observable & ~plan.covered], "red")},
+                    candidates=space.positions, executed=space.positions[plan.order[:1]],
+                    selected=space.positions[plan.order[1:]], look_ats=space.look_ats[plan.order[1:]],
+                    path_polyline=plan.polyline,
+                    title=title or f"{plan.method}: {len(plan.order)} views, {100 * plan.coverage:.2f} % coverage")

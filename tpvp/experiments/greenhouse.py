@@ -263,6 +263,58 @@ def plan_path(scene: RowScene, positions, config: RowConfig, with_passive: bool 
 
 
 @dataclass(frozen=True, eq=False)
+class PlanningVisibility:
+    """What the passive views and the candidates see of the planning surface at one covering voxel.
+    Rows: the passive views first (executed), then the candidates in their order."""
+
+    grid: object  # OccupancyGrid of the planning surface at ``resolution``
+    positions: np.ndarray  # (passive + candidates, 3)
+    look_ats: np.ndarray
+    matrix: object  # csr (views, planning voxels)
+    n_passive: int
+    resolution: float
+
+    @property
+    def planning_voxels(self) -> int:
+        return self.grid.size
+
+
+def planning_visibility(scene: RowScene, candidates: CandidateViews, transferred: RowTransfer,
+                        config: RowConfig = RowConfig()) -> PlanningVisibility:
+    """Stage "visibility" of :func:`run_row_case`: the planning surface (the transferred, inflated
+    previous session) voxelised at ``config.selection.cover_resolution``, and what each passive
+    view and each candidate sees of it (ray casting; the dominant cost of planning)."""
+    resolution = config.selection.cover_resolution
+    planning_grid = build_grid(voxels.voxelise(transferred.inflation.planning, resolution), resolution)
+    room = scene.room
+    positions = np.concatenate([room.initial_positions, candidates.positions])
+    look_ats = np.concatenate([room.initial_look_ats, candidates.look_ats])
+    matrix = safe_visibility(planning_grid, positions, look_ats, config.sensor)
+    return PlanningVisibility(planning_grid, positions, look_ats, matrix, len(room.initial_positions), resolution)
+
+
+def select_row_views(scene: RowScene, visibility: PlanningVisibility, config: RowConfig = RowConfig()):
+    """Stage "selection" of :func:`run_row_case`: the set cover over the planning surface with the
+    passive views counted as executed. Returns ``(selection result, chosen candidate indices)``
+    (indices into the candidates, in the solver's order)."""
+    space = ViewSpace(f"{scene.room.room} transfer candidates", visibility.positions, visibility.look_ats,
+                      max_range=config.sensor.max_range, look_at_fixed=False)
+    problem = SelectionProblem(visibility.matrix, tuple(range(visibility.n_passive)), space, visibility.grid.centres,
+                               config.selection.planning_target(config.view_space))
+    selection = select_views(problem, config.selection)
+    return selection, np.asarray(selection.selected, dtype=np.int64) - visibility.n_passive
+
+
+def order_row_views(scene: RowScene, candidates: CandidateViews, chosen, config: RowConfig = RowConfig()):
+    """Stage "path" of :func:`run_row_case`: the band path over the chosen candidates from the end
+    of the passive sweep. Returns ``(band path result, reported length (m, sweep included),
+    candidate indices in execution order)``."""
+    chosen = np.asarray(chosen, dtype=np.int64)
+    path, length = plan_path(scene, candidates.positions[chosen], config)
+    return path, length, chosen[path.order]
+
+
+@dataclass(frozen=True, eq=False)
 class RowCaseResult:
     candidates: CandidateViews
     selected: np.ndarray  # candidate indices in execution order
@@ -298,9 +350,11 @@ class RowCaseResult:
 
 def run_row_case(scene: RowScene, config: RowConfig = RowConfig(), progress=None,
                  transferred: RowTransfer | None = None) -> RowCaseResult:
-    """Ours on one row pair: transfer, candidates, visibility on the planning surface at
-    ``config.selection.cover_resolution``, set cover with the passive views as executed, band
-    path, execution. ``transferred``: :func:`row_transfer` of this scene when already computed."""
+    """Ours on one row pair: transfer (:func:`row_transfer`), candidates (:func:`row_candidates`),
+    visibility on the planning surface at ``config.selection.cover_resolution``
+    (:func:`planning_visibility`), set cover with the passive views as executed
+    (:func:`select_row_views`), band path (:func:`order_row_views`), execution. ``transferred``:
+    :func:`row_transfer` of this scene when already computed."""
     say = progress or (lambda stage: None)
     transferred = transferred or row_transfer(scene, config, progress)
     timings = dict(scene.timings) | dict(transferred.timings)
@@ -312,29 +366,17 @@ def run_row_case(scene: RowScene, config: RowConfig = RowConfig(), progress=None
 
     t = time.perf_counter()
     say("visibility")
-    resolution = config.selection.cover_resolution
-    planning_grid = build_grid(voxels.voxelise(transferred.inflation.planning, resolution), resolution)
-    room = scene.room
-    n_passive = len(room.initial_positions)
-    positions = np.concatenate([room.initial_positions, candidates.positions])
-    look_ats = np.concatenate([room.initial_look_ats, candidates.look_ats])
-    planning_visibility = safe_visibility(planning_grid, positions, look_ats, config.sensor)
+    visibility = planning_visibility(scene, candidates, transferred, config)
     timings["visibility"] = time.perf_counter() - t
 
     t = time.perf_counter()
     say("view selection")
-    space = ViewSpace(f"{room.room} transfer candidates", positions, look_ats, max_range=config.sensor.max_range,
-                      look_at_fixed=False)
-    problem = SelectionProblem(planning_visibility, tuple(range(n_passive)), space, planning_grid.centres,
-                               config.selection.planning_target(config.view_space))
-    selection = select_views(problem, config.selection)
-    chosen = np.asarray(selection.selected, dtype=np.int64) - n_passive
+    selection, chosen = select_row_views(scene, visibility, config)
     timings["selection"] = time.perf_counter() - t
 
     t = time.perf_counter()
     say("path")
-    path, length = plan_path(scene, candidates.positions[chosen], config)
-    selected = chosen[path.order]
+    path, length, selected = order_row_views(scene, candidates, chosen, config)
     timings["path"] = time.perf_counter() - t
     timings["planning"] = sum(timings[k] for k in ("registration", "inflation", "targets", "visibility",
                                                    "selection", "path"))
@@ -347,8 +389,9 @@ def run_row_case(scene: RowScene, config: RowConfig = RowConfig(), progress=None
     if path.gap > config.path.band_gap:
         warnings.append(f"band path ends {100 * path.gap:.1f} % above its lower bound (target "
                         f"{100 * config.path.band_gap:g} %) after {config.path.band_seconds:g} s per band")
+    n_passive = visibility.n_passive
     return RowCaseResult(candidates, selected, path, coverage, row_coverage(scene, []), n_passive + len(selected),
-                         length, selection, transferred, planning_grid.size, timings, warnings)
+                         length, selection, transferred, visibility.planning_voxels, timings, warnings)
 
 
 def candidate_truth(scene: RowScene, candidates: CandidateViews):

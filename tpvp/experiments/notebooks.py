@@ -1,51 +1,256 @@
-"""Run the step-by-step notebooks headless: quick mode (CI) or full mode (``make notebooks``).
+"""Execute the tutorial notebooks headless and keep what they show.
 
-The first code cell of each notebook is its parameters cell (``quick = ...``, ``output = ...``);
-it is replaced before execution, so the stored notebooks stay free of outputs and local paths.
-``python -m tpvp.experiments.notebooks [--quick] [--output DIR] [NAME ...]``.
+``python -m tpvp.experiments.notebooks [--full] [--output DIR] [NAME ...]`` (``make notebooks``
+runs the full protocol) executes each notebook with its parameters cell set (``full``,
+``output``) and publishes, as one folder through :func:`tpvp.io.publish.staged_folder`:
+
+- ``<name>.ipynb``: the executed notebook, outputs included;
+- ``<name>.html``: an HTML copy (figures embedded as data, plotly.js inline; equations rendered
+  offline by the MathJax copy in ``mathjax/``);
+- ``<name>/``: the figures (PNG, PDF for the paper's figures) and tables (CSV) it exported, and
+  in the full protocol the raw results (``results/*.parquet``) that reader's mode reuses;
+- ``index.html`` and ``manifest.json``: every notebook with its mode and wall time.
+
+An interrupted run leaves the previous folder whole; running a subset keeps the other notebooks'
+copies. The stored notebooks under ``notebooks/`` stay free of outputs and local paths.
 """
 
 from __future__ import annotations
 
 import argparse
+import html
+import json
+import os
+import re
+import shutil
 import sys
+import time
+from dataclasses import dataclass
+from datetime import datetime, timezone
 from pathlib import Path
 
-NOTEBOOKS = Path(__file__).resolve().parent.parent.parent / "notebooks"
+ROOT = Path(__file__).resolve().parent.parent.parent
+NOTEBOOKS = ROOT / "notebooks"
+MANIFEST = "manifest.json"
+MATHJAX = "mathjax"  # folder beside the HTML copies
+FULL_TIMEOUT_S = 3 * 3600  # per cell; the longest full-protocol cell takes about 15 min on 2 cores
+READER_TIMEOUT_S = 600
 
 
 def notebook_paths(names=()) -> list[Path]:
     paths = sorted(NOTEBOOKS.glob("[0-9][0-9]_*.ipynb"))
     if names:
+        unknown = set(names) - {p.stem for p in paths} - {p.name for p in paths}
+        if unknown:
+            from tpvp.errors import ConfigError
+
+            raise ConfigError(f"no notebook named {', '.join(sorted(unknown))}; choose from "
+                              f"{', '.join(p.stem for p in paths)}")
         paths = [p for p in paths if p.stem in names or p.name in names]
     return paths
 
 
-def run_notebook(path, quick: bool, output, timeout: int = 1800):
-    """Execute one notebook with its parameters cell set to ``quick`` and ``output``; raises on
-    any cell error. Returns the executed notebook (not written back)."""
+def published_results() -> Path:
+    """Where ``make notebooks`` publishes (``$TPVP_NOTEBOOK_RESULTS`` or ``outputs/notebooks``)."""
+    return Path(os.environ.get("TPVP_NOTEBOOK_RESULTS") or ROOT / "outputs" / "notebooks")
+
+
+def experiment_cache() -> Path:
+    """The experiments' per-task cache (``$TPVP_EXPERIMENT_CACHE`` or ``outputs/cache``, as the
+    ``tpvp experiments`` commands use from the repository root)."""
+    return Path(os.environ.get("TPVP_EXPERIMENT_CACHE") or ROOT / "outputs" / "cache")
+
+
+# --------------------------------------------------------------------------------------------------
+# results for the tables: full protocol when available, else a labelled reduced run
+# --------------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class ProtocolResults:
+    raw: object  # pandas.DataFrame
+    source: str  # where the rows come from, in words (shown above the tables)
+    full_protocol: bool
+
+
+def protocol_results(output, name: str, full: bool, run_full, cached_full, run_reduced) -> ProtocolResults:
+    """The raw rows a notebook's tables are made of. ``full``: ``run_full()`` (the paper's
+    protocol; the rows are kept under ``output/results/<name>.parquet`` for ``make notebooks`` to
+    publish). Reader's mode: the full protocol from the experiment cache (``cached_full()``, None
+    unless every task is cached), else from the results ``make notebooks`` published, else
+    ``run_reduced()``, labelled as a reduced run. Never numbers typed in by hand."""
+    import pandas as pd
+
+    from tpvp.io import atomic_write_bytes
+
+    output = Path(output)
+    if full:
+        raw = run_full()
+        atomic_write_bytes(output / "results" / f"{name}.parquet", raw.to_parquet(index=False))
+        return ProtocolResults(raw, "the paper's full protocol, computed in this run", True)
+    raw = cached_full()
+    if raw is not None:
+        return ProtocolResults(raw, "the paper's full protocol, read from the experiment cache", True)
+    published = published_results() / output.name / "results" / f"{name}.parquet"
+    if published.is_file():
+        stamp = datetime.fromtimestamp(published.stat().st_mtime, timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+        return ProtocolResults(pd.read_parquet(published),
+                               f"the paper's full protocol, published by `make notebooks` ({stamp})", True)
+    return ProtocolResults(run_reduced(), "a REDUCED RUN (a few cases, not the paper's protocol): set "
+                           "`full = True` or run `make notebooks` for the paper's numbers", False)
+
+
+def show_source(results: ProtocolResults) -> None:
+    """One line above a table saying where its rows come from."""
+    from IPython.display import Markdown, display
+
+    marker = "" if results.full_protocol else "⚠️ "
+    display(Markdown(f"{marker}Rows: {results.source}; {len(results.raw)} raw rows."))
+
+
+# --------------------------------------------------------------------------------------------------
+# executing and publishing
+# --------------------------------------------------------------------------------------------------
+
+
+def set_parameters(notebook, full: bool, output) -> None:
+    """Set ``full`` and ``output`` in the first code cell, keeping its comments."""
+    first = next(cell for cell in notebook.cells if cell.cell_type == "code")
+    source = first.source
+    for name, value in (("full", repr(bool(full))), ("output", repr(str(output)))):
+        source, count = re.subn(rf"^({name}\s*=\s*)[^#\n]*?(\s*(#.*)?)$", lambda m: f"{m.group(1)}{value}{m.group(2)}",
+                                source, count=1, flags=re.M)
+        if not count:
+            source += f"\n{name} = {value}"
+    first.source = source
+
+
+def run_notebook(path, full: bool, output, timeout: int | None = None):
+    """Execute one notebook (kernel ``python3``, working folder ``notebooks/`` as in JupyterLab)
+    with its parameters set; raises ``nbclient.exceptions.CellExecutionError`` on a cell error.
+    Returns the executed notebook."""
     import nbformat
     from nbclient import NotebookClient
 
     notebook = nbformat.read(path, as_version=4)
-    first = next(cell for cell in notebook.cells if cell.cell_type == "code")
-    first.source = f"quick = {bool(quick)}\noutput = {str(Path(output))!r}\n"
-    client = NotebookClient(notebook, timeout=timeout, kernel_name="python3",
-                            resources={"metadata": {"path": str(Path(path).parent.parent)}})
+    set_parameters(notebook, full, output)
+    client = NotebookClient(notebook, timeout=timeout or (FULL_TIMEOUT_S if full else READER_TIMEOUT_S),
+                            kernel_name="python3", resources={"metadata": {"path": str(Path(path).parent)}})
     client.execute()
     return notebook
+
+
+def mathjax_folder() -> Path:
+    """MathJax 2.7, shipped by the package jupyter-server-mathjax: the HTML copies and the site
+    render the notebooks' equations offline from a copy beside them."""
+    import jupyter_server_mathjax
+
+    return Path(jupyter_server_mathjax.__file__).parent / "static"
+
+
+def html_copy(notebook) -> str:
+    """An HTML page of an executed notebook: figures and plotly.js embedded; equations rendered
+    by the MathJax copy in ``mathjax/`` beside the page."""
+    from nbconvert import HTMLExporter
+
+    exporter = HTMLExporter(template_name="lab", embed_images=True,
+                            mathjax_url=f"{MATHJAX}/MathJax.js?config=TeX-AMS-MML_HTMLorMML-full,Safe")
+    body, _ = exporter.from_notebook_node(notebook)
+    return body
+
+
+def _replace_paths(notebook, old: str, new: str) -> None:
+    """Write the staging folder's path as the published one in sources and text outputs."""
+    for cell in notebook.cells:
+        cell.source = cell.source.replace(old, new)
+        for out in cell.get("outputs", []):
+            if "text" in out:
+                out["text"] = out["text"].replace(old, new)
+            for mime, value in out.get("data", {}).items():
+                if mime.startswith("text/") and isinstance(value, str):
+                    out["data"][mime] = value.replace(old, new)
+
+
+def output_counts(notebook) -> dict:
+    """What an executed notebook shows: images, rendered tables, interactive views, errors."""
+    counts = {"images": 0, "tables": 0, "interactive": 0, "errors": 0}
+    for cell in notebook.cells:
+        for out in cell.get("outputs", []):
+            data = out.get("data", {})
+            counts["images"] += "image/png" in data
+            text = data.get("text/html", "")
+            counts["tables"] += "<table" in text
+            counts["interactive"] += "plotly-graph-div" in text
+            counts["errors"] += out.get("output_type") == "error"
+    return counts
+
+
+def _index_page(manifest: dict) -> str:
+    rows = "\n".join(
+        f"<tr><td><a href=\"{html.escape(stem)}.html\">{html.escape(stem)}</a></td><td>{entry['mode']}</td>"
+        f"<td>{entry['seconds']:.0f} s</td><td>{entry['images']}</td><td>{entry['tables']}</td>"
+        f"<td>{entry['executed_utc']}</td><td><a href=\"{html.escape(stem)}.ipynb\">.ipynb</a></td></tr>"
+        for stem, entry in sorted(manifest.items()))
+    return ("<!doctype html><html><head><meta charset=\"utf-8\"><title>tpvp notebooks</title>"
+            "<style>body{font-family:sans-serif;margin:2em}td,th{padding:.3em .8em;border-bottom:1px solid #ddd}"
+            "</style></head><body><h1>tpvp: executed notebooks</h1>"
+            "<p>Made by <code>make notebooks</code> (full protocol) or <code>python -m tpvp.experiments.notebooks</code> "
+            "(reader's mode). Each page is self-contained.</p><table><tr><th>notebook</th><th>mode</th>"
+            "<th>wall time</th><th>figures</th><th>tables</th><th>executed</th><th>notebook file</th></tr>"
+            f"{rows}</table></body></html>\n")
+
+
+def run_notebooks(names=(), full: bool = False, destination=None, timeout: int | None = None,
+                  progress: bool = True) -> dict:
+    """Execute the notebooks and publish them (see the module docstring) under ``destination``
+    (default :func:`published_results`). Returns the manifest entries of this run."""
+    import nbformat
+
+    from tpvp.io import atomic_write_text
+    from tpvp.io.publish import staged_folder
+
+    paths = notebook_paths(names)
+    destination = Path(destination or published_results()).absolute()
+    mode = "full" if full else "reader"
+    done = {}
+    with staged_folder(destination, keep_existing=True, what="notebook output folder") as stage:
+        manifest_path = stage.folder / MANIFEST
+        manifest = json.loads(manifest_path.read_text()) if manifest_path.is_file() else {}
+        for path in paths:
+            if progress:
+                print(f"running {path.name} ({mode} mode) ...", flush=True)
+            output = stage.folder / path.stem
+            shutil.rmtree(output, ignore_errors=True)  # hard links of the old copy: the published one stays
+            start = time.perf_counter()
+            notebook = run_notebook(path, full, output, timeout)
+            seconds = time.perf_counter() - start
+            _replace_paths(notebook, str(stage.folder), str(destination))
+            atomic_write_text(stage.path(f"{path.stem}.ipynb"), nbformat.writes(notebook))
+            atomic_write_text(stage.path(f"{path.stem}.html"), html_copy(notebook))
+            done[path.stem] = {"mode": mode, "seconds": round(seconds, 1), **output_counts(notebook),
+                               "executed_utc": datetime.now(timezone.utc).isoformat(timespec="seconds")}
+            if progress:
+                print(f"  {path.stem}: {seconds:.0f} s, {done[path.stem]['images']} figures, "
+                      f"{done[path.stem]['tables']} tables", flush=True)
+        if not (stage.folder / MATHJAX / "MathJax.js").is_file():
+            shutil.copytree(mathjax_folder(), stage.folder / MATHJAX, dirs_exist_ok=True)
+        manifest.update(done)
+        atomic_write_text(stage.path(MANIFEST), json.dumps(manifest, indent=1) + "\n")
+        atomic_write_text(stage.path("index.html"), _index_page(manifest))
+    return done
 
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("names", nargs="*", help="notebooks to run (default: all)")
-    parser.add_argument("--quick", action="store_true", help="a few cases per notebook (as CI runs them)")
-    parser.add_argument("--output", default="outputs/notebooks", help="figures and tables go here (default: %(default)s)")
+    parser.add_argument("--full", action="store_true",
+                        help="the paper's full protocol (make notebooks; about an hour on 2 cores with cold caches)")
+    parser.add_argument("--output", default=None, help="publish here (default: outputs/notebooks in the repository)")
     args = parser.parse_args(argv)
-    for path in notebook_paths(args.names):
-        print(f"running {path.name} ({'quick' if args.quick else 'full'} mode)", flush=True)
-        run_notebook(path, args.quick, Path(args.output).absolute() / path.stem)
-    return 0
+    from tpvp.cli import run_command
+
+    args.func = lambda a: run_notebooks(a.names, a.full, a.output) and 0
+    return run_command(args, "notebooks")
 
 
 if __name__ == "__main__":

@@ -11,6 +11,7 @@ import numpy as np
 import pandas as pd
 
 from tpvp.config import config_yaml
+from tpvp.experiments.greenhouse import execute
 from tpvp.io import atomic_write_text
 from tpvp.io.plan import plan_table, write_plan
 from tpvp.path.local import local_path_points
@@ -46,6 +47,41 @@ def plan_frames(scene, order, roles) -> tuple[dict, dict, dict]:
     return tables, frames, extra
 
 
+def plan_geometry(scene, result) -> dict:
+    """What the pictures of a plant plan draw: the executed views' positions in order, the path
+    around the obstacle sphere, and per ground-truth voxel whether the plan covered it and whether
+    any view could (the oracle set)."""
+    order = result.executed_views + result.planned_views
+    positions = scene.view_space.positions[order]
+    centre, radius = result.obstacle
+    polyline = np.concatenate([local_path_points(a, b, centre, radius) for a, b in zip(positions[:-1], positions[1:])]) \
+        if len(positions) > 1 else positions
+    covered = np.zeros(scene.grid.size, bool)
+    covered[covered_voxels(scene.truth_visibility, order)] = True
+    observable = np.zeros(scene.grid.size, bool)
+    observable[scene.oracle] = True
+    return {"positions": positions, "polyline": polyline, "covered": covered, "observable": observable}
+
+
+def plan_3d(scene, result, title: str = ""):
+    """An interactive (plotly) view of a plant plan: covered plant voxels (blue), observable but
+    missed ones (red), the candidate views, the executed and planned views and the path."""
+    from tpvp.viz.interactive import scene_3d  # plotly: loaded only for a notebook's 3D view
+
+    geometry = plan_geometry(scene, result)
+    plant = scene.grid.countable
+    centres = scene.grid.centres
+    covered, observable = geometry["covered"] & plant, geometry["observable"] & plant
+    space = scene.view_space
+    return scene_3d({"covered voxels": (centres[covered], "royalblue"),
+                     "missed voxels (observable)": (centres[observable & ~covered], "red"),
+                     "never observable": (centres[plant & ~observable], "lightgray")},
+                    candidates=space.positions, executed=space.positions[result.executed_views],
+                    selected=space.positions[result.planned_views], look_ats=space.look_ats[result.planned_views],
+                    path_polyline=geometry["polyline"],
+                    title=title or f"{result.n_views} views, {100 * result.coverage:.2f} % coverage")
+
+
 def write_case_outputs(folder, scene, result, config, name: str = "case", extra_summary: dict | None = None) -> dict:
     """Results (JSON + CSV), the plan in both frames, ``config.yaml`` + ``provenance.json``, PNG
     figures and a rerun ``.rrd`` in ``folder``."""
@@ -68,23 +104,16 @@ def write_case_outputs(folder, scene, result, config, name: str = "case", extra_
     seeds = {"registration": getattr(config.registration.embedded_deformation, "seed", None)}
     atomic_write_text(folder / "provenance.json", json.dumps(provenance(config, seeds), indent=2) + "\n")
 
-    space = scene.view_space
-    centre, radius = result.obstacle
-    positions = space.positions[order]
-    polyline = np.concatenate([local_path_points(a, b, centre, radius) for a, b in zip(positions[:-1], positions[1:])]) \
-        if len(positions) > 1 else positions
+    geometry = plan_geometry(scene, result)
+    space, positions, polyline = scene.view_space, geometry["positions"], geometry["polyline"]
     plan_png = plot_plan(folder / "plan.png", scene.current, space.positions, space.positions[result.executed_views],
                          space.positions[result.planned_views], polyline,
                          f"{name}: {result.n_views} views, {100 * result.coverage:.2f}% coverage, "
-                         f"{result.path_length:.2f} m path", obstacle=(centre, radius),
+                         f"{result.path_length:.2f} m path", obstacle=result.obstacle,
                          table_points=scene.table_points if len(scene.table_points) else None)
-    covered = np.zeros(scene.grid.size, bool)
-    covered[covered_voxels(scene.truth_visibility, order)] = True
-    observable = np.zeros(scene.grid.size, bool)
-    observable[scene.oracle] = True
     plant = scene.grid.countable
-    coverage_png = plot_coverage(folder / "coverage.png", scene.grid.centres[plant], covered[plant],
-                                 observable[plant], f"{name}: ground-truth voxels "
+    coverage_png = plot_coverage(folder / "coverage.png", scene.grid.centres[plant], geometry["covered"][plant],
+                                 geometry["observable"][plant], f"{name}: ground-truth voxels "
                                  f"({1e3 * config.gt_resolution:g} mm, planning frame)")
     rrd = write_recording(
         folder / "recording.rrd",
@@ -139,3 +168,19 @@ def write_row_case_outputs(folder, scene, result, config, name: str = "row case"
     return {"results": folder / "results.json", "plan": plans["world"], "plan_json": plans["json"],
             "config": folder / "config.yaml", "provenance": folder / "provenance.json", "figures": [plan_png],
             "recording": rrd}
+
+
+def row_plan_3d(scene, result, title: str = ""):
+    """An interactive (plotly) view of a row plan: the oracle voxels the passive sweep and the
+    planned views covered (blue) and those they missed (red), the passive views (black), the
+    planned views in execution order with their look-at rays, and the band path."""
+    from tpvp.viz.interactive import scene_3d  # plotly: loaded only for a notebook's 3D view
+
+    covered = np.union1d(execute(scene, result.positions, result.look_ats), scene.passive_seen)
+    missed = np.setdiff1d(scene.oracle, covered)
+    centres, room = scene.grid.centres, scene.room
+    return scene_3d({"covered voxels": (centres[np.intersect1d(covered, scene.oracle)], "royalblue"),
+                     "missed voxels (observable)": (centres[missed], "red")},
+                    executed=room.initial_positions, selected=result.positions, look_ats=result.look_ats,
+                    path_polyline=np.concatenate([room.initial_positions[-1:], result.positions]),
+                    title=title or f"{result.n_views} views, {100 * result.coverage:.2f} % coverage")

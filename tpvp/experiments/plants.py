@@ -25,7 +25,7 @@ import pandas as pd
 from tpvp import __version__
 from tpvp.config import PlantConfig, make_config, to_dict
 from tpvp.errors import ConfigError, InputFileError
-from tpvp.experiments.runner import cached_table, code_fingerprint, run_cases  # noqa: F401 (code_fingerprint re-exported)
+from tpvp.experiments.runner import all_cached, cached_table, code_fingerprint, run_cases  # noqa: F401 (code_fingerprint re-exported)
 from tpvp.registry import Registry
 
 SPECIES = ("tomato", "maize")
@@ -361,6 +361,16 @@ def run_experiments(cases, methods, config: PlantConfig | None = None, cache_dir
     order = {m: i for i, m in enumerate(methods)}
     return raw.sort_values(["view_space", "instance", "rotation_deg", "initial_view", "method"],
                            key=lambda c: c.map(order) if c.name == "method" else c, kind="stable").reset_index(drop=True)
+
+
+def cached_experiments(cases, methods, config: PlantConfig | None = None, cache_dir=None) -> pd.DataFrame | None:
+    """:func:`run_experiments`' table read from the cache when every (case, method) is there,
+    else None (nothing is computed)."""
+    config = config or make_config("plant")
+    cases, methods = list(cases), list(methods)
+    if not all_cached(cache_dir, (task_key(case, method, config) for case in cases for method in methods)):
+        return None
+    return run_experiments(cases, methods, config, cache_dir=cache_dir, progress=False)
 
 
 # --------------------------------------------------------------------------------------------------

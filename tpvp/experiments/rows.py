@@ -23,7 +23,7 @@ import pandas as pd
 from tpvp import __version__
 from tpvp.config import RowConfig, make_config, to_dict
 from tpvp.errors import ConfigError, InputFileError
-from tpvp.experiments.runner import cached_table, code_fingerprint, run_cases
+from tpvp.experiments.runner import all_cached, cached_table, code_fingerprint, run_cases
 from tpvp.registry import Registry
 
 ROOMS = ("room1", "room4")
@@ -334,6 +334,17 @@ def run_row_experiments(cases, methods=ALL_METHODS, config: RowConfig | None = N
     order = {m: i for i, m in enumerate(methods)}
     return raw.sort_values(["room", "previous_session", "method"],
                            key=lambda c: c.map(order) if c.name == "method" else c, kind="stable").reset_index(drop=True)
+
+
+def cached_row_experiments(cases, methods, config: RowConfig | None = None, settings: RowSettings = RowSettings(),
+                           cache_dir=None) -> pd.DataFrame | None:
+    """:func:`run_row_experiments`' table read from the cache when every (case, method) is there,
+    else None (nothing is computed)."""
+    config = config or make_config("row")
+    cases, methods = list(cases), list(methods)
+    if not all_cached(cache_dir, (task_key(case, method, config, settings) for case in cases for method in methods)):
+        return None
+    return run_row_experiments(cases, methods, config, settings, cache_dir=cache_dir, progress=False)
 
 
 # --------------------------------------------------------------------------------------------------

@@ -47,6 +47,11 @@ def cached_table(path, compute):
     return table
 
 
+def all_cached(cache_dir, keys) -> bool:
+    """Whether every task key has its table in ``cache_dir`` (nothing is read or computed)."""
+    return cache_dir is not None and all((Path(cache_dir) / f"{key}.parquet").is_file() for key in keys)
+
+
 def run_cases(case_tasks, cases, arguments: tuple, tasks_per_case: int, workers: int = 1, scheduler=None,
               progress: bool = True, desc: str = "experiments") -> list:
     """``case_tasks(case, *arguments)`` (a module-level function returning a list of tables) for

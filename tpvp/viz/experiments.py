@@ -53,7 +53,7 @@ def plot_coverage_effort(path, raw: pd.DataFrame, title: str = ""):
     if title:
         fig.suptitle(title)
     fig.tight_layout()
-    return _save(fig, path)
+    return _save(fig, path, vector=True)
 
 
 def plot_species_bars(path, table: pd.DataFrame, value: str = "views", title: str = ""):
@@ -65,7 +65,7 @@ def plot_species_bars(path, table: pd.DataFrame, value: str = "views", title: st
     ax.set_title(title or f"Ours: {value} per species and view space")
     ax.grid(axis="y", alpha=0.3)
     fig.tight_layout()
-    return _save(fig, path)
+    return _save(fig, path, vector=True)
 
 
 _COMPARISON_LABELS = {"gmc": "GMC (sequential NBV)", "ours": "Ours (one-shot)", "optimum": "exact optimum"}
@@ -142,4 +142,4 @@ def plot_frontier(path, frontier: pd.DataFrame, title: str = ""):
     fig.suptitle(f"{title}: coverage-effort frontier (labels: planning target, %)" if title
                  else "Coverage-effort frontier (labels: planning target, %)")
     fig.tight_layout()
-    return _save(fig, path)
+    return _save(fig, path, vector=True)

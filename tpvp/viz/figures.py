@@ -34,10 +34,12 @@ def _equal_axes(ax, points):
     ax.set_zlabel("z (m)")
 
 
-def _save(fig, path) -> Path:
+def _save(fig, path, vector: bool = False) -> Path:
+    """Write ``fig`` to ``path`` (PNG) and, for the paper's figures (``vector=True``), a PDF beside it."""
     path = Path(path)
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=130, bbox_inches="tight", format=path.suffix.lstrip(".") or "png")
+    for target in (path, path.with_suffix(".pdf")) if vector else (path,):
+        with atomic_path(target) as tmp:
+            fig.savefig(tmp, dpi=130, bbox_inches="tight", format=target.suffix.lstrip(".") or "png")
     plt.close(fig)
     return path
 

@@ -33,7 +33,7 @@ def plot_row_frontier(path, table6: pd.DataFrame, title: str = ""):
     axes[1].legend(fontsize=7, loc="lower right", ncol=2)
     fig.suptitle(title or "Greenhouse rows: coverage-effort frontier (solid: ours, dotted: the paper)")
     fig.tight_layout()
-    return _save(fig, path)
+    return _save(fig, path, vector=True)
 
 
 def plot_row_paths(path, box, row_points, plans: dict, title: str = ""):
@@ -105,7 +105,7 @@ def plot_stage_times(path, timing: pd.DataFrame, title: str = ""):
     ax.legend(fontsize=7)
     ax.set_title(title or "Ours: planning time per stage")
     fig.tight_layout()
-    return _save(fig, path)
+    return _save(fig, path, vector=True)
 
 
 def plot_fused_clouds(path, box, truth_points, clouds: dict, slab: float = 0.4, title: str = ""):
@@ -129,3 +129,88 @@ def plot_fused_clouds(path, box, truth_points, clouds: dict, slab: float = 0.4, 
     fig.suptitle(title)
     fig.tight_layout()
     return _save(fig, path)
+
+
+def plot_row_scene(path, box, centres, oracle_ids, passive_ids, passive_positions, title: str = ""):
+    """The ground truth of a row from the side (plant box frame): voxels no view-box position sees
+    (grey), the oracle set Ω (green), the part of it the passive sweep observed (blue), and the
+    passive views (black triangles). ``centres``: ground-truth voxel centres; ``oracle_ids`` and
+    ``passive_ids``: indices into them."""
+    centres = np.asarray(centres, dtype=float).reshape(-1, 3)
+    layers = np.zeros(len(centres), dtype=np.int8)
+    layers[np.asarray(oracle_ids, dtype=np.int64)] = 1
+    layers[np.intersect1d(np.asarray(passive_ids, dtype=np.int64), np.asarray(oracle_ids, dtype=np.int64))] = 2
+    local = box.to_local(centres)
+    cameras = box.to_local(np.asarray(passive_positions, dtype=float).reshape(-1, 3))
+    fig, ax = plt.subplots(figsize=(12, 3.8))
+    for layer, colour, label in ((0, "lightgray", "not visible from the view box"),
+                                 (1, "tab:green", "oracle set Ω, missed by the passive sweep"),
+                                 (2, "tab:blue", "oracle set Ω, seen by the passive sweep (Q)")):
+        points = _subsample(local[layers == layer], limit=40_000)[0]
+        ax.scatter(points[:, 0], points[:, 2], s=0.3, color=colour, label=f"{label}: {int((layers == layer).sum()):,}")
+    ax.scatter(cameras[:, 0], cameras[:, 2], s=30, marker="v", color="black", label="passive views")
+    ax.set_aspect("equal")
+    ax.set_xlabel("along the row (m)")
+    ax.set_ylabel("height (m)")
+    legend = ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))
+    for handle in legend.legend_handles:
+        handle.set_sizes([25])
+    ax.set_title(title or "The row's ground-truth voxels", fontsize=10)
+    fig.tight_layout()
+    return _save(fig, path)
+
+
+def plot_stage_breakdown(path, stages: pd.DataFrame, paper: pd.DataFrame | None = None, title: str = ""):
+    """Seconds of each planning stage of one case (horizontal bars, log scale), one bar per stage
+    and covering voxel where the stage depends on it, with the paper's range (14 cores) beside it.
+    ``stages``: rows ``stage``, ``cover_resolution_cm`` (NaN for stages before the covering voxel)
+    and ``seconds``; ``paper``: :func:`tpvp.experiments.rows.paper_timing` (``stage``,
+    ``cover_resolution_cm``, ``paper_seconds_low``/``_high``; a row without a covering voxel
+    applies to every one)."""
+    stages = stages.reset_index(drop=True)
+    labels = [stage if pd.isna(cm) else f"{stage} @ {cm:g} cm" for stage, cm in zip(stages["stage"],
+                                                                                      stages["cover_resolution_cm"])]
+    y = np.arange(len(stages))[::-1]
+    colours = plt.get_cmap("tab10")
+    order = {stage: i for i, stage in enumerate(dict.fromkeys(stages["stage"]))}
+    fig, ax = plt.subplots(figsize=(8.5, 0.42 * len(stages) + 1.4))
+    ax.barh(y + 0.12, stages["seconds"].clip(lower=1e-3), 0.5,
+            color=[colours(order[s] % 10) for s in stages["stage"]], label="ours (this machine)")
+    for yy, seconds in zip(y, stages["seconds"]):
+        ax.text(max(seconds, 1e-3) * 1.1, yy + 0.12, f"{seconds:.2f} s", va="center", fontsize=7)
+    if paper is not None:
+        shown = False
+        for yy, stage, cm in zip(y, stages["stage"], stages["cover_resolution_cm"]):
+            rows = paper[(paper["stage"] == stage) & (paper["cover_resolution_cm"].isna()
+                                                      | np.isclose(paper["cover_resolution_cm"], cm))]
+            if len(rows):
+                low, high = float(rows["paper_seconds_low"].iloc[0]), float(rows["paper_seconds_high"].iloc[0])
+                ax.plot([low, high], [yy - 0.28] * 2, color="black", linewidth=2.5, solid_capstyle="butt",
+                        marker="D" if low == high else "|", markersize=5 if low == high else 9,
+                        label=None if shown else "the paper (14 cores)")
+                ax.text(high * 1.15, yy - 0.28, f"{low:g} s" if low == high else f"{low:g}-{high:g} s",
+                        va="center", fontsize=7)
+                shown = True
+    ax.set_yticks(y, labels)
+    ax.set_xscale("log")
+    ax.set_xlabel("seconds (log scale)")
+    ax.grid(alpha=0.3, axis="x")
+    ax.legend(fontsize=7, loc="lower right")
+    ax.set_title(title or "Where the planning time goes", fontsize=10)
+    fig.tight_layout()
+    return _save(fig, path, vector=True)
+
+
+def plot_protocol_stages(path, timing: pd.DataFrame, paper: pd.DataFrame | None = None, title: str = ""):
+    """:func:`plot_stage_breakdown` of the experiment runner's rows of Ours (one case): ``timing``
+    has ``cover_resolution_cm`` and ``seconds_<stage>`` columns, one row per covering voxel. The
+    stages before the covering voxel (registration, inflation, targets) are drawn once (their mean
+    over the rows), visibility, selection and path once per covering voxel."""
+    before = [s for s in ("registration", "inflation", "targets") if f"seconds_{s}" in timing]
+    after = [s for s in ("visibility", "selection", "path") if f"seconds_{s}" in timing]
+    once = [{"stage": s, "cover_resolution_cm": np.nan, "seconds": float(timing[f"seconds_{s}"].mean())}
+            for s in before]
+    each = [{"stage": s, "cover_resolution_cm": float(cm), "seconds": float(seconds)}
+            for s in after for cm, seconds in zip(timing["cover_resolution_cm"], timing[f"seconds_{s}"])]
+    stages = pd.DataFrame(once + each)
+    return plot_stage_breakdown(path, stages, paper, title)

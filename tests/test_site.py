@@ -1,0 +1,150 @@
+"""The documentation site (``make docs``) in a real browser.
+
+Builds the site from the reader's-mode executions that tests/test_notebooks.py publishes into the
+session folder ``executed_notebooks`` (same xdist group, so the same worker, after it). Run alone,
+that folder is empty: the test then executes only 01_getting_started (about 20 s) and builds from
+what is there (``allow_missing=True``, at least one notebook), to stay cheap; ``make docs`` itself
+refuses a folder that lacks a notebook.
+
+The site is served on 127.0.0.1 and every HTML page is opened in Debian's Chromium driven by
+playwright, with every request that leaves 127.0.0.1 blocked and counted (the site must work
+offline). Skipped, with the reason, where /usr/bin/chromium or playwright is missing.
+"""
+
+import functools
+import http.server
+import importlib.util
+import re
+import threading
+import urllib.error
+import urllib.parse
+import urllib.request
+from pathlib import Path
+
+import pytest
+
+CHROMIUM = Path("/usr/bin/chromium")
+ARGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networking", "--disable-component-update",
+        "--disable-sync", "--no-first-run"]
+
+_WAIT_FOR_IMAGES = """() => Promise.all(Array.from(document.images).map(img => img.complete ? null :
+    new Promise(done => { img.addEventListener('load', done); img.addEventListener('error', done); })))"""
+_IMAGES = "() => Array.from(document.images).map(img => [img.currentSrc || img.src, img.naturalWidth])"
+_LINKS = "() => Array.from(document.querySelectorAll('a[href]')).map(a => a.href)"
+_PLOTLY_RENDERED = """() => Array.from(document.querySelectorAll('.plotly-graph-div'))
+    .filter(div => div.querySelector('svg.main-svg, canvas')).length"""
+_MATH_RENDERED = "() => document.querySelectorAll('.MathJax, .MathJax_Display, mjx-container').length"
+
+
+class _QuietHandler(http.server.SimpleHTTPRequestHandler):
+    def log_message(self, *args):
+        pass
+
+
+@pytest.fixture
+def served(tmp_path):
+    """An HTTP server on 127.0.0.1 for a folder: ``served(folder) -> base URL``."""
+    servers = []
+
+    def serve(folder):
+        server = http.server.ThreadingHTTPServer(("127.0.0.1", 0),
+                                                 functools.partial(_QuietHandler, directory=str(folder)))
+        threading.Thread(target=server.serve_forever, daemon=True).start()
+        servers.append(server)
+        return f"http://127.0.0.1:{server.server_address[1]}/"
+
+    yield serve
+    for server in servers:
+        server.shutdown()
+        server.server_close()
+
+
+def _has_math(notebook: Path) -> bool:
+    import nbformat
+
+    cells = nbformat.read(notebook, as_version=4).cells
+    return any(cell.cell_type == "markdown" and re.search(r"\$[^$\n]+\$", cell.source) for cell in cells)
+
+
+def _status(url: str) -> int:
+    try:
+        with urllib.request.urlopen(url, timeout=10) as response:
+            return response.status
+    except urllib.error.HTTPError as exc:
+        return exc.code
+
+
+@pytest.mark.slow
+@pytest.mark.xdist_group("notebooks")
+def test_site_pages_load_with_their_figures_links_and_3d_views_offline(executed_notebooks, tmp_path, served):
+    if not CHROMIUM.is_file():
+        pytest.skip(f"no browser: {CHROMIUM} is missing (make system-deps installs the Debian package "
+                    f"chromium as root)")
+    if importlib.util.find_spec("playwright") is None:
+        pytest.skip("the playwright package is missing (environment.txt)")
+    from playwright.sync_api import sync_playwright
+
+    from tpvp.experiments.notebooks import run_notebooks
+    from tpvp.experiments.site import build_site
+
+    if not list(Path(executed_notebooks).glob("[0-9][0-9]_*.ipynb")):
+        run_notebooks(["01_getting_started"], full=False, destination=executed_notebooks, progress=False)
+    summary = build_site(executed_notebooks, tmp_path / "site", allow_missing=True, progress=False)
+    site = Path(summary["destination"])
+    tutorials = {stem for stem, _ in summary["notebooks"]}
+    assert tutorials and all((site / f"{stem}.html").is_file() for stem in tutorials)
+    pages = sorted(p.relative_to(site).as_posix() for p in site.rglob("*.html")
+                   if "assets" not in p.relative_to(site).parts)
+    assert "index.html" in pages
+    base = served(site)
+
+    external, problems, internal_links = [], [], set()
+    plotly_rendered, math_rendered, banners = 0, 0, 0
+    with sync_playwright() as playwright:
+        browser = playwright.chromium.launch(executable_path=str(CHROMIUM), args=ARGS)
+        context = browser.new_context()
+
+        def only_local(route):
+            if route.request.url.startswith(base) or route.request.url.startswith(("data:", "blob:")):
+                return route.continue_()
+            external.append(route.request.url)
+            return route.abort()
+
+        context.route("**/*", only_local)
+        page = context.new_page()
+        errors = []
+        page.on("pageerror", lambda exc: errors.append(str(exc)))
+        for name in pages:
+            errors.clear()
+            response = page.goto(base + name, wait_until="load")
+            if response is None or response.status != 200:
+                problems.append(f"{name}: HTTP {response.status if response else 'no response'}")
+                continue
+            page.evaluate(_WAIT_FOR_IMAGES)
+            for src, width in page.evaluate(_IMAGES):
+                if not width:
+                    problems.append(f"{name}: image {src[:80]} has no width (not loaded)")
+            for href in page.evaluate(_LINKS):
+                if href.startswith(base):
+                    internal_links.add(urllib.parse.urldefrag(href)[0])
+            if Path(name).stem in tutorials:
+                if page.locator(".plotly-graph-div").count():
+                    page.wait_for_function(_PLOTLY_RENDERED, timeout=15000)
+                    plotly_rendered += page.evaluate(_PLOTLY_RENDERED)
+                if summary["mathjax"] and _has_math(executed_notebooks / f"{Path(name).stem}.ipynb"):
+                    page.wait_for_function(_MATH_RENDERED, timeout=15000)
+                    math_rendered += page.evaluate(_MATH_RENDERED)
+                banners += page.get_by_text("executed in reader's mode").count()
+            problems.extend(f"{name}: page error {error}" for error in errors)
+        browser.close()
+
+    for url in sorted(internal_links):
+        status = _status(url)
+        if status != 200:
+            problems.append(f"broken internal link {url[len(base):]}: HTTP {status}")
+    assert not problems, "\n".join(problems)
+    assert not external, f"the site asked the network for {sorted(set(external))[:5]}"
+    assert plotly_rendered >= 1, "no plotly figure rendered on a tutorial page"
+    assert not summary["mathjax"] or math_rendered, "MathJax is shipped but rendered no formula"
+    reader = sum(mode != "full" for _, mode in summary["notebooks"])
+    assert banners >= reader, "a reader's-mode page lacks its label"
