@@ -80,34 +80,6 @@ def plot_prior_candidates(path, box, row_points, candidate_sets: dict, title: st
     return _save(fig, path)
 
 
-def plot_stage_times(path, timing: pd.DataFrame, title: str = ""):
-    """Seconds per planning stage of Ours at each covering voxel (stacked bars, log scale) beside
-    the paper's visibility times (14 cores). ``timing``: rows with ``cover_resolution_cm`` and
-    ``seconds_<stage>`` columns; ``paper_visibility_s`` when known."""
-    stages = [c for c in ("seconds_registration", "seconds_targets", "seconds_visibility", "seconds_selection",
-                          "seconds_path") if c in timing]
-    fig, ax = plt.subplots(figsize=(7.5, 4.2))
-    labels = [f"{r:g} cm" for r in timing["cover_resolution_cm"]]
-    x = np.arange(len(timing))
-    bottom = np.zeros(len(timing))
-    for stage in stages:
-        values = timing[stage].to_numpy(dtype=float)
-        ax.bar(x - 0.2, values, 0.4, bottom=bottom, label=stage.removeprefix("seconds_") + " (ours, 2 cores)")
-        bottom += values
-    if "paper_visibility_s" in timing:
-        ax.bar(x + 0.2, timing["paper_visibility_s"], 0.4, color="black", alpha=0.4,
-               label="visibility (paper, 14 cores)")
-    ax.set_xticks(x, labels)
-    ax.set_yscale("log")
-    ax.set_ylabel("seconds")
-    ax.set_xlabel("covering voxel")
-    ax.grid(alpha=0.3, axis="y")
-    ax.legend(fontsize=7)
-    ax.set_title(title or "Ours: planning time per stage")
-    fig.tight_layout()
-    return _save(fig, path, vector=True)
-
-
 def plot_fused_clouds(path, box, truth_points, clouds: dict, slab: float = 0.4, title: str = ""):
     """Side views of fused reconstructions (e.g. noise-free, noisy without ICP, noisy with ICP)
     over the ground truth, in a ``slab`` (m) along the row at the plant box centre."""
