@@ -289,3 +289,20 @@ def test_summarise_in_table_layout(study):
     assert text.columns[:4].tolist() == ["sigma_t (m)", "sigma_r (deg)", "ICP", "Chamfer (mm)"]
     p = table.loc[1, "precision_10mm_mean"] * 100
     assert text.loc[1, "precision @ 10mm"].startswith(f"{p:.1f} ± ")
+
+
+def test_summary_in_the_papers_units_stands_beside_table7():
+    from tpvp.experiments.rows import paper_pose_noise
+    from tpvp.viz.notebook import beside_paper
+
+    rows = pd.DataFrame({"sigma_t_m": [0.0, 0.01, 0.01, 0.01], "sigma_r_deg": [0.0, 2.0, 2.0, 2.0],
+                         "icp": [False, False, True, True], "chamfer_mm": [4.0, 9.0, 4.0, 4.2],
+                         "precision_1cm": [1.0, 0.4, 0.99, 0.97]})
+    table = pn.in_paper_units(pn.summarise(rows))
+    assert table["icp"].tolist() == ["-", "OFF", "ON"]
+    assert table["precision_1cm_mean"].tolist() == pytest.approx([100.0, 40.0, 98.0])
+    assert table["chamfer_mm_mean"].tolist() == pytest.approx([4.0, 9.0, 4.1])
+    beside = beside_paper(table, paper_pose_noise(), on=["sigma_t_m", "sigma_r_deg", "icp"],
+                          values=("chamfer_mm", "precision_1cm"))
+    assert beside["paper_chamfer_mm"].tolist() == [5.44, 13.87, 6.08]
+    assert beside["paper_precision_1cm"].tolist() == [100.0, 27.3, 98.7]

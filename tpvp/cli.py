@@ -441,7 +441,7 @@ def build_parser() -> argparse.ArgumentParser:
 def run_command(args, name: str) -> int:
     """Run ``args.func(args)``; a TpvpError becomes one line ``<name>: error: ...`` on stderr and
     its exit status (2 bad input, 3 destination busy, 4 outputs not written), Ctrl-C one line saying
-    whether the outputs were published and exit status 130 (README: exit codes)."""
+    whether the outputs were published and exit status 130 (docs/cli.md: exit status)."""
     try:
         return args.func(args)
     except TpvpError as exc:

@@ -113,7 +113,7 @@ class RegistrationConfig:
 # *predicted* planning surface, per view space: planning target = 1 - ratio x (1 - target).
 # Calibrated on generated pairs of seeds 10-12 (never the evaluation seeds 0-2) for a 98 % request:
 # the largest ratio whose mean true coverage reaches it with no case more than one point below,
-# with either warm-up NBV (geometric or prior). Other view spaces take the smallest. README,
+# with either warm-up NBV (geometric or prior). Other view spaces take the smallest. docs/cli.md,
 # "Asking for a coverage level"; benchmarks/coverage_target_calibration.py.
 CALIBRATED_MISS_RATIO = {"hemisphere": 0.5, "sphere": 0.25}
 

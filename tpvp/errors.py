@@ -10,7 +10,7 @@ a traceback.
 class TpvpError(Exception):
     """Base class of all errors caused by input the user can fix."""
 
-    exit_code = 2  # the command line's exit status for this error (README: exit codes)
+    exit_code = 2  # the command line's exit status for this error (docs/cli.md: exit status)
 
 
 class InputFileError(TpvpError, OSError):

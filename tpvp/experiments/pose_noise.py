@@ -466,3 +466,15 @@ def summarise(df: pd.DataFrame, formatted: bool = False) -> pd.DataFrame:
         table[name] = [f"{a * scale:.{digits}f} ± {b * scale:.{digits}f}"
                        for a, b in zip(out[f"{m}_mean"], out[f"{m}_std"])]
     return table
+
+
+def in_paper_units(summary: pd.DataFrame) -> pd.DataFrame:
+    """A :func:`summarise` table in the paper's units and labels, ready to stand beside
+    :func:`tpvp.experiments.rows.paper_pose_noise`: precision, recall and F-score in percent, ICP
+    as "-" (noise-free), "OFF" or "ON"."""
+    out = summary.copy()
+    free = (out["sigma_t_m"] == 0) & (out["sigma_r_deg"] == 0)
+    out["icp"] = np.where(free, "-", np.where(out["icp"].astype(bool), "ON", "OFF"))
+    for column in [c for c in out.columns if c.split("_")[0] in ("precision", "recall", "f1") and c != "n"]:
+        out[column] = 100.0 * out[column]
+    return out
