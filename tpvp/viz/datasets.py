@@ -97,23 +97,32 @@ def plot_prepared_pair(path, previous, current, normalised, ground_truth, names=
     return _save(fig, path)
 
 
+def _grouped_bars(ax, groups, series, ylabel: str, ncols: int, values_on_bars: bool = False) -> None:
+    """One group of bars per entry of ``groups``, one bar per ``(values, label, colour)`` of
+    ``series`` (NaN values draw no bar), the legend above the axes."""
+    width = 0.8 / max(len(series), 1)
+    x = np.arange(len(groups))
+    for k, (values, label, colour) in enumerate(series):
+        bars = ax.bar(x + (k - (len(series) - 1) / 2) * width, np.nan_to_num(values), width, color=colour, label=label)
+        if values_on_bars:
+            ax.bar_label(bars, labels=["" if np.isnan(v) else f"{v:.2f}" for v in values], fontsize=6, padding=1)
+    ax.set_xticks(x, groups, fontsize=8)
+    ax.set_ylabel(ylabel, fontsize=8)
+    ax.tick_params(labelsize=7)
+    ax.legend(fontsize=7, ncols=ncols, loc="lower center", bbox_to_anchor=(0.5, 1.0), frameon=False)
+    ax.grid(axis="y", alpha=0.3)
+
+
 def plot_cleaning_steps(path, manifest: pd.DataFrame, title: str = "") -> Path:
     """Points left after each cleaning step (:data:`CLEANING_STEPS`), one group of bars per session
     of a ``greenhouse clean`` / ``prepare-session`` manifest, labelled ``<site> <date>``."""
     steps = [(column, label) for column, label in CLEANING_STEPS if column in manifest]
     sessions = [f"{s} {d}" for s, d in zip(manifest["site"], manifest["date"])]
     fig, ax = plt.subplots(figsize=(max(6.0, 1.9 * len(sessions) + 2.5), 3.6))
-    width = 0.8 / len(steps)
     colours = plt.get_cmap("viridis")(np.linspace(0.0, 0.9, len(steps)))
-    x = np.arange(len(sessions))
-    for k, ((column, label), colour) in enumerate(zip(steps, colours)):
-        values = manifest[column].to_numpy(float) / 1000.0
-        ax.bar(x + (k - (len(steps) - 1) / 2) * width, values, width, color=colour, label=label)
-    ax.set_xticks(x, sessions, fontsize=8)
-    ax.set_ylabel("points (thousands)", fontsize=8)
-    ax.tick_params(labelsize=7)
-    ax.legend(fontsize=7, ncols=3, loc="lower center", bbox_to_anchor=(0.5, 1.0), frameon=False)
-    ax.grid(axis="y", alpha=0.3)
+    _grouped_bars(ax, sessions, [(manifest[column].to_numpy(float) / 1000.0, label, colour)
+                                 for (column, label), colour in zip(steps, colours)],
+                  "points (thousands)", ncols=3)
     if title:
         fig.suptitle(title, fontsize=10, y=1.12)
     return _save(fig, path)
@@ -168,19 +177,10 @@ def plot_alignment_residuals(path, residuals: pd.DataFrame, title: str = "") -> 
                            "true error at box corners (mm)") if c in residuals and residuals[c].notna().any()]
     table = residuals[residuals["alignment"] != "reference day"]
     fig, ax = plt.subplots(figsize=(max(5.5, 1.8 * len(table) + 2.5), 3.4))
-    width = 0.8 / max(len(columns), 1)
-    x = np.arange(len(table))
     colours = plt.get_cmap("tab10")(np.arange(len(columns)))
-    for k, (column, colour) in enumerate(zip(columns, colours)):
-        values = table[column].to_numpy(float)
-        bars = ax.bar(x + (k - (len(columns) - 1) / 2) * width, np.nan_to_num(values), width, color=colour,
-                      label=column.replace(" (mm)", ""))
-        ax.bar_label(bars, labels=["" if np.isnan(v) else f"{v:.2f}" for v in values], fontsize=6, padding=1)
-    ax.set_xticks(x, list(table["session"]), fontsize=8)
-    ax.set_ylabel("mm", fontsize=8)
-    ax.tick_params(labelsize=7)
-    ax.legend(fontsize=7, ncols=2, loc="lower center", bbox_to_anchor=(0.5, 1.0), frameon=False)
-    ax.grid(axis="y", alpha=0.3)
+    _grouped_bars(ax, list(table["session"]), [(table[column].to_numpy(float), column.replace(" (mm)", ""), colour)
+                                               for column, colour in zip(columns, colours)],
+                  "mm", ncols=2, values_on_bars=True)
     if title:
         fig.suptitle(title, fontsize=10, y=1.1)
     return _save(fig, path)
