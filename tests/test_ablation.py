@@ -127,8 +127,8 @@ def test_method_config_is_what_the_registry_runs(method, monkeypatch):
 
 
 def test_unknown_method_and_case():
-    with pytest.raises(KeyError, match="unknown ablation method"):
-        ablation.method_config(make_config("plant"), "ours-pc-nbv")
+    with pytest.raises(KeyError, match="unknown one-shot method"):
+        ablation.method_config(make_config("plant"), "gmc")
     with pytest.raises(KeyError, match="no quick case"):
         ablation.example_case("rose", "sphere")
     case = ablation.example_case("tomato", "hemisphere")

@@ -6,9 +6,8 @@ inflation, on the transferred previous session :math:`\\tilde P` alone (``inflat
 False``: no :math:`I`, no :math:`Q`). Table IV registers the previous session onto the coarse
 reconstruction :math:`Q` of the initial view only (``nbv.warm_up_views = 0``) or of the initial view
 plus one warm-up NBV. The functions below take one scene apart along these two switches, with the
-same configuration overrides as the experiment registry (:data:`METHOD_OVERRIDES`,
-``tpvp.experiments.plants``); the tables of the whole protocol come from
-:func:`tpvp.experiments.plants.tables`.
+same configuration overrides as the experiment registry (``plants.method_config``); the tables of
+the whole protocol come from :func:`tpvp.experiments.plants.tables`.
 """
 
 from __future__ import annotations
@@ -20,38 +19,24 @@ import pandas as pd
 from scipy import sparse
 
 from tpvp.config import make_config
+from tpvp.experiments.plants import _mean_std, default_cases, method_config, to_flat
+from tpvp.experiments.single_plant import run_case, transfer
+from tpvp.metrics.geometry import chamfer_distance, nearest_distances
 from tpvp.scene import voxels
+from tpvp.sensor.grid import build_grid
+from tpvp.visibility import visibility_matrix
 
-#: The configuration overrides of the four methods of Tables III and IV (as registered in
-#: ``tpvp.experiments.plants.PLANT_METHODS``).
-METHOD_OVERRIDES = {
-    "ours": {},
-    "ours-no-inflation": {"inflation.enabled": False},
-    "initial-view-only": {"nbv.warm_up_views": 0},
-    "initial-view-only-no-inflation": {"nbv.warm_up_views": 0, "inflation.enabled": False},
-}
-ABLATION_METHODS = list(METHOD_OVERRIDES)
+#: The four methods of Tables III and IV (their overrides: ``plants.ONE_SHOT_OVERRIDES``).
+ABLATION_METHODS = ["ours", "ours-no-inflation", "initial-view-only", "initial-view-only-no-inflation"]
 
 #: Origin labels of a planning-surface voxel, in the order of precedence (a voxel occupied by
 #: several layers takes the first one's label).
 ORIGINS = ("transferred P~", "coarse Q", "inflation I")
 
 
-def method_config(config, method: str):
-    """``config`` with the overrides of ``method`` (one of :data:`METHOD_OVERRIDES`)."""
-    from tpvp.experiments.plants import to_flat
-
-    if method not in METHOD_OVERRIDES:
-        raise KeyError(f"unknown ablation method {method!r}; choose from {', '.join(METHOD_OVERRIDES)}")
-    overrides = METHOD_OVERRIDES[method]
-    return make_config("plant", to_flat(config) | overrides) if overrides else config
-
-
 def example_case(species: str = "maize", view_space: str = "sphere"):
     """The reduced protocol's case (``plants.default_cases(quick=True)``) of ``species`` in
     ``view_space``: generated pair seed 0, rotation 0, initial view 17."""
-    from tpvp.experiments.plants import default_cases
-
     for case in default_cases(quick=True):
         if case.instance.species == species and case.view_space == view_space:
             return case
@@ -112,9 +97,6 @@ def sole_cover(visibility, views) -> dict:
 def planning_visibility(scene, planning_cloud, resolution: float):
     """The planning grid of ``planning_cloud`` at ``resolution`` and what each candidate view sees
     of it, exactly as :func:`tpvp.experiments.single_plant.run_case` builds them."""
-    from tpvp.sensor.grid import build_grid
-    from tpvp.visibility import visibility_matrix
-
     grid = build_grid(voxels.voxelise(planning_cloud, resolution), resolution)
     space = scene.view_space
     return grid, visibility_matrix(grid, space.positions, space.look_ats, scene.sensor)
@@ -137,7 +119,6 @@ class InflationAblation:
     ``only_without``: views only that plan selects; ``seen_only_with`` / ``seen_only_without``:
     ground-truth (oracle) voxel ids that plan's views see and the other plan's views miss.
     """
-
     with_inflation: object  # CaseResult
     without_inflation: object
     resolution: float
@@ -162,9 +143,7 @@ def _views(result) -> list:
 def inflation_ablation(scene, config, transferred=None) -> InflationAblation:
     """Plan ``scene`` with ``config`` (inflation on) and with inflation off, from one shared warm-up
     and registration (``transferred``, computed when not given), and compare the two plans."""
-    from tpvp.experiments.single_plant import run_case, transfer
-
-    config = make_config("plant", {**_flat(config), "inflation.enabled": True})
+    config = make_config("plant", {**to_flat(config), "inflation.enabled": True})
     transferred = transferred or transfer(scene, config)
     with_inflation = run_case(scene, config, transferred=transferred)
     without = run_case(scene, method_config(config, "ours-no-inflation"), transferred=transferred)
@@ -184,12 +163,6 @@ def inflation_ablation(scene, config, transferred=None) -> InflationAblation:
         only_without=[v for v in without.planned_views if v not in views_with],
         seen_only_with=only_covered_by(scene.truth_visibility, views_with, views_without, scene.oracle),
         seen_only_without=only_covered_by(scene.truth_visibility, views_without, views_with, scene.oracle))
-
-
-def _flat(config) -> dict:
-    from tpvp.experiments.plants import to_flat
-
-    return to_flat(config)
 
 
 def inflation_table(ablation: InflationAblation) -> pd.DataFrame:
@@ -258,7 +231,6 @@ class RegistrationSetting:
     """One warm-up setting: its transfer (executed views, coarse reconstruction, alignment), the
     distance of every transferred point to today's plant (m) and its plans with and without
     inflation."""
-
     label: str
     warm_up_views: int
     transfer: object  # tpvp.experiments.single_plant.Transfer
@@ -280,16 +252,13 @@ def registration_ablation(scene, config, transfers: dict | None = None) -> list:
     warm-up NBVs: register, measure against today's plant, plan with and without inflation.
     ``transfers``: already computed transfers by number of warm-up views (e.g. ``{1: transferred}``).
     Returns two :class:`RegistrationSetting`."""
-    from tpvp.experiments.single_plant import run_case, transfer
-    from tpvp.metrics.geometry import chamfer_distance, nearest_distances
-
     transfers = dict(transfers or {})
     warm_ups = max(1, config.nbv.warm_up_views)
     settings = []
     for count, label, (with_method, without_method) in (
             (0, "initial view only", ("initial-view-only", "initial-view-only-no-inflation")),
             (warm_ups, f"initial view + {warm_ups} warm-up NBV", ("ours", "ours-no-inflation"))):
-        base = make_config("plant", {**_flat(config), "nbv.warm_up_views": count})
+        base = make_config("plant", {**to_flat(config), "nbv.warm_up_views": count})
         with_config, without_config = (method_config(base, m) for m in (with_method, without_method))
         transferred = transfers.get(count) or transfer(scene, with_config)
         warped = transferred.alignment.warped
@@ -305,8 +274,6 @@ def registration_table(scene, settings) -> pd.DataFrame:
     Chamfer distances (mm) of the previous session to Q before registration and of the transferred
     model to Q and to today's plant after it (Table IV's measure), the share of transferred points
     within 2 mm (the ground-truth voxel size) of today's plant, and the plans' views and coverage."""
-    from tpvp.metrics import chamfer_distance
-
     unregistered = 1e3 * chamfer_distance(scene.previous, scene.current)
     rows = []
     for s in settings:
@@ -334,8 +301,6 @@ def pooled_table(raw: pd.DataFrame, methods=ABLATION_METHODS) -> pd.DataFrame:
     pooled over species and view spaces (the paper's text reports the initial-view-only variant
     without inflation this way), mean and std over the cases; sources in the order they come,
     methods in the order of ``methods``."""
-    from tpvp.experiments.plants import _mean_std
-
     rows = raw[raw["method"].isin(list(methods)) & raw["views"].notna()]
     order = {m: i for i, m in enumerate(methods)}
     table = _mean_std(rows, ["source", "method"],

@@ -234,24 +234,44 @@ def _shared_transfer(scene, config):
     return _transfers[key]
 
 
-def _one_shot(**overrides):
+#: Configuration overrides of the one-shot methods: what Tables I, III and IV switch off or on.
+ONE_SHOT_OVERRIDES = {
+    "ours": {},
+    "ours-no-inflation": {"inflation.enabled": False},
+    "initial-view-only": {"nbv.warm_up_views": 0},
+    "initial-view-only-no-inflation": {"nbv.warm_up_views": 0, "inflation.enabled": False},
+    "one-shot-no-prior": {"registration.method": "no-prior", "inflation.enabled": False},
+    "ours-pc-nbv": {"nbv.method": "pc-nbv"},
+}
+
+
+def method_config(config: PlantConfig, method: str) -> PlantConfig:
+    """``config`` with the overrides of the one-shot ``method`` (:data:`ONE_SHOT_OVERRIDES`)."""
+    if method not in ONE_SHOT_OVERRIDES:
+        raise KeyError(f"unknown one-shot method {method!r}; choose from {', '.join(ONE_SHOT_OVERRIDES)}")
+    overrides = ONE_SHOT_OVERRIDES[method]
+    return make_config("plant", to_flat(config) | overrides) if overrides else config
+
+
+def _one_shot(name: str):
     def method(scene, config):
         from tpvp.experiments.single_plant import run_case
 
-        config = make_config("plant", to_flat(config) | overrides) if overrides else config
+        config = method_config(config, name)
         return [_case_row(run_case(scene, config, transferred=_shared_transfer(scene, config)), scene, config)]
     return method
 
 
-PLANT_METHODS.register("ours", "the paper's method: warm-up NBV, registration, inflation, set cover, TSP")(_one_shot())
+PLANT_METHODS.register("ours", "the paper's method: warm-up NBV, registration, inflation, set cover, TSP")(
+    _one_shot("ours"))
 PLANT_METHODS.register("ours-no-inflation", "planning on the aligned previous session only (Table III)")(
-    _one_shot(**{"inflation.enabled": False}))
+    _one_shot("ours-no-inflation"))
 PLANT_METHODS.register("initial-view-only", "registration on the initial view, no warm-up NBV (Table IV)")(
-    _one_shot(**{"nbv.warm_up_views": 0}))
+    _one_shot("initial-view-only"))
 PLANT_METHODS.register("initial-view-only-no-inflation", "initial view only, without inflation")(
-    _one_shot(**{"nbv.warm_up_views": 0, "inflation.enabled": False}))
+    _one_shot("initial-view-only-no-inflation"))
 PLANT_METHODS.register("one-shot-no-prior", "set cover + TSP on the coarse reconstruction alone (no previous session)")(
-    _one_shot(**{"registration.method": "no-prior", "inflation.enabled": False}))
+    _one_shot("one-shot-no-prior"))
 
 
 @PLANT_METHODS.register("gmc", "GMC-style sequential NBV from the initial view; the whole 1..20 curve")
@@ -296,7 +316,7 @@ PLANT_METHODS.register("ma-scvp", "MA-SCVP-style learned view set after one PC-N
 PLANT_METHODS.register("ma-scvp-oracle", "MA-SCVP's pipeline with the exact set cover it is trained to predict")(
     _learned("oracle"))
 PLANT_METHODS.register("ours-pc-nbv", "the paper's method with the learned PC-NBV warm-up view")(
-    _one_shot(**{"nbv.method": "pc-nbv"}))
+    _one_shot("ours-pc-nbv"))
 
 
 # --------------------------------------------------------------------------------------------------
