@@ -142,8 +142,8 @@ def test_unknown_method_and_case():
 
 
 def _plan(executed, planned, coverage=0.5):
-    return SimpleNamespace(executed_views=executed, planned_views=planned, n_views=len(executed) + len(planned),
-                           coverage=coverage, path_length=1.0)
+    return SimpleNamespace(executed_views=executed, planned_views=planned, order=executed + planned,
+                           n_views=len(executed) + len(planned), coverage=coverage, path_length=1.0)
 
 
 def test_exclusive_views_table_hand_made():

@@ -20,11 +20,10 @@ from scipy import sparse
 
 from tpvp.config import make_config
 from tpvp.experiments.plants import _mean_std, default_cases, method_config, to_flat
-from tpvp.experiments.single_plant import run_case, transfer
+from tpvp.experiments.single_plant import planning_visibility, run_case, transfer
 from tpvp.metrics.geometry import chamfer_distance, nearest_distances
 from tpvp.scene import voxels
-from tpvp.sensor.grid import build_grid
-from tpvp.visibility import visibility_matrix
+from tpvp.visibility import covered_voxels
 
 #: The four methods of Tables III and IV (their overrides: ``plants.ONE_SHOT_OVERRIDES``).
 ABLATION_METHODS = ["ours", "ours-no-inflation", "initial-view-only", "initial-view-only-no-inflation"]
@@ -66,9 +65,7 @@ def covered_mask(visibility, views, size: int | None = None) -> np.ndarray:
     """Boolean mask over the columns of ``visibility`` (views x voxels): seen by any of ``views``."""
     matrix = sparse.csr_matrix(visibility)
     mask = np.zeros(matrix.shape[1] if size is None else size, dtype=bool)
-    views = np.asarray(list(views), dtype=np.int64)
-    if views.size:
-        mask[np.asarray(matrix[views].sum(axis=0)).ravel() > 0] = True
+    mask[covered_voxels(matrix, list(views))] = True
     return mask
 
 
@@ -92,14 +89,6 @@ def sole_cover(visibility, views) -> dict:
         seen = matrix.indices[matrix.indptr[view]:matrix.indptr[view + 1]]
         out[view] = np.sort(seen[counts[seen] == 1])
     return out
-
-
-def planning_visibility(scene, planning_cloud, resolution: float):
-    """The planning grid of ``planning_cloud`` at ``resolution`` and what each candidate view sees
-    of it, exactly as :func:`tpvp.experiments.single_plant.run_case` builds them."""
-    grid = build_grid(voxels.voxelise(planning_cloud, resolution), resolution)
-    space = scene.view_space
-    return grid, visibility_matrix(grid, space.positions, space.look_ats, scene.sensor)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -136,10 +125,6 @@ class InflationAblation:
         return voxels.key_centres(self.surface_keys, self.resolution)
 
 
-def _views(result) -> list:
-    return list(result.executed_views) + list(result.planned_views)
-
-
 def inflation_ablation(scene, config, transferred=None) -> InflationAblation:
     """Plan ``scene`` with ``config`` (inflation on) and with inflation off, from one shared warm-up
     and registration (``transferred``, computed when not given), and compare the two plans."""
@@ -154,7 +139,7 @@ def inflation_ablation(scene, config, transferred=None) -> InflationAblation:
     if not np.array_equal(grid_with.keys, keys):  # both are the code order of the same voxel set
         raise AssertionError("the planning grid and the labelled surface disagree")
     _, visibility_without = planning_visibility(scene, without.clouds["planning"], resolution)
-    views_with, views_without = _views(with_inflation), _views(without)
+    views_with, views_without = with_inflation.order, without.order
     return InflationAblation(
         with_inflation=with_inflation, without_inflation=without, resolution=resolution,
         surface_keys=keys, surface_origin=origin, visibility_with=visibility_with,
@@ -190,17 +175,17 @@ def exclusive_views_table(scene, ablation: InflationAblation) -> pd.DataFrame:
     plan, by origin (why the set cover needed it)."""
     space = scene.view_space
     inflated = sparse.csr_matrix(ablation.visibility_with)
+    truth = sparse.csr_matrix(scene.truth_visibility)
+    oracle = np.zeros(truth.shape[1], dtype=bool)
+    oracle[scene.oracle] = True
     rows = []
     for name, result, only, visibility, other in (
             ("with inflation", ablation.with_inflation, ablation.only_with, ablation.visibility_with,
              ablation.without_inflation),
             ("without inflation", ablation.without_inflation, ablation.only_without, ablation.visibility_without,
              ablation.with_inflation)):
-        sole = sole_cover(visibility, _views(result))
-        misses = ~covered_mask(scene.truth_visibility, _views(other))
-        oracle = np.zeros(scene.truth_visibility.shape[1], dtype=bool)
-        oracle[scene.oracle] = True
-        truth = sparse.csr_matrix(scene.truth_visibility)
+        sole = sole_cover(visibility, result.order)
+        misses = ~covered_mask(truth, other.order)
         for view in only:
             seen = truth.indices[truth.indptr[view]:truth.indptr[view + 1]]
             # the surface without inflation is the P~ voxels alone: its voxel ids follow another grid

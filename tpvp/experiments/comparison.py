@@ -63,7 +63,7 @@ def compare_methods(scene: Scene, config: PlantConfig, views: int | None = None)
     Ours uses)."""
     centre = np.zeros(3)
     ours = run_case(scene, config)
-    order = ours.executed_views + ours.planned_views
+    order = ours.order
     views = int(views or len(order))
     radius = ours.obstacle[1]
     plans = [_plan(scene, "ours", order, ours.path_length, [radius] * (len(order) - 1),

@@ -51,7 +51,7 @@ def plan_geometry(scene, result) -> dict:
     """What the pictures of a plant plan draw: the executed views' positions in order, the path
     around the obstacle sphere, and per ground-truth voxel whether the plan covered it and whether
     any view could (the oracle set)."""
-    order = result.executed_views + result.planned_views
+    order = result.order
     positions = scene.view_space.positions[order]
     centre, radius = result.obstacle
     polyline = np.concatenate([local_path_points(a, b, centre, radius) for a, b in zip(positions[:-1], positions[1:])]) \
@@ -86,7 +86,7 @@ def write_case_outputs(folder, scene, result, config, name: str = "case", extra_
     """Results (JSON + CSV), the plan in both frames, ``config.yaml`` + ``provenance.json``, PNG
     figures and a rerun ``.rrd`` in ``folder``."""
     folder = Path(folder)
-    order = result.executed_views + result.planned_views
+    order = result.order
     roles = ["initial"] + ["warm-up NBV"] * (len(result.executed_views) - 1) + ["planned"] * len(result.planned_views)
     tables, frames, extra = plan_frames(scene, order, roles)
     plans = write_plan(folder, tables, frames, extra)

@@ -187,8 +187,7 @@ def _optimum_for_coverage(scene, result, config) -> dict:
     from tpvp.visibility import covered_voxels
 
     oracle = np.asarray(scene.oracle)
-    reached = int(np.isin(oracle, covered_voxels(scene.truth_visibility,
-                                                 result.executed_views + result.planned_views)).sum())
+    reached = int(np.isin(oracle, covered_voxels(scene.truth_visibility, result.order)).sum())
     best = partial_set_cover(sparse.csr_matrix(scene.truth_visibility)[:, oracle], reached,
                              executed=[result.executed_views[0]], config=config.selection.set_cover)
     return {"optimum_views_same_coverage": best.objective + 1, "optimum_same_coverage_optimal": best.optimal}

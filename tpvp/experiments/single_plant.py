@@ -80,6 +80,11 @@ class CaseResult:
     planning_target: float = 1.0  # fraction of the planning surface the selection had to see
 
     @property
+    def order(self) -> list:
+        """Every executed view in execution order: the initial view, the warm-up views, the planned ones."""
+        return list(self.executed_views) + list(self.planned_views)
+
+    @property
     def set_cover(self):
         """The set-cover solver's own result (bound, gap, dropped voxels), when that method ran."""
         return self.selection.details
@@ -227,6 +232,14 @@ def transfer(scene: Scene, config: PlantConfig = PlantConfig(), progress=None) -
                     _registration_warnings(scene, alignment, config))
 
 
+def planning_visibility(scene: Scene, planning_cloud, resolution: float):
+    """The planning grid of ``planning_cloud`` voxelised at ``resolution`` and what each candidate
+    view sees of it (ray casting): ``(grid, (views x planning voxels) matrix)``."""
+    grid = build_grid(voxels.voxelise(planning_cloud, resolution), resolution)
+    space = scene.view_space
+    return grid, visibility_matrix(grid, space.positions, space.look_ats, scene.sensor)
+
+
 def run_case(scene: Scene, config: PlantConfig = PlantConfig(), progress=None,
              transferred: Transfer | None = None) -> CaseResult:
     """Warm-up, transfer, plan and execute one case; ``progress(stage)`` is called per stage.
@@ -248,14 +261,12 @@ def run_case(scene: Scene, config: PlantConfig = PlantConfig(), progress=None,
 
     t = time.perf_counter()
     say("visibility")
-    resolution = config.selection.cover_resolution
-    planning_grid = build_grid(voxels.voxelise(inflated.planning, resolution), resolution)
-    planning_visibility = visibility_matrix(planning_grid, space.positions, space.look_ats, scene.sensor)
+    planning_grid, visibility = planning_visibility(scene, inflated.planning, config.selection.cover_resolution)
     timings["visibility"] = time.perf_counter() - t
 
     t = time.perf_counter()
     say("view selection")
-    problem = SelectionProblem(planning_visibility, tuple(executed), space, planning_grid.centres,
+    problem = SelectionProblem(visibility, tuple(executed), space, planning_grid.centres,
                                config.selection.planning_target(config.view_space), nbv=nbv)
     selection = select_views(problem, config.selection)
     timings["selection"] = time.perf_counter() - t

@@ -106,7 +106,7 @@ class Showcase:
     @property
     def order(self) -> list:
         """Every executed view in execution order: initial, warm-up, planned."""
-        return list(self.result.executed_views) + list(self.result.planned_views)
+        return self.result.order
 
     @property
     def label(self) -> str:
