@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import html
+import importlib.util
 import json
 import os
 import re
@@ -28,6 +29,10 @@ import time
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
+
+from tpvp.errors import ConfigError
+from tpvp.io import atomic_write_bytes, atomic_write_text
+from tpvp.io.publish import staged_folder
 
 ROOT = Path(__file__).resolve().parent.parent.parent
 NOTEBOOKS = ROOT / "notebooks"
@@ -42,8 +47,6 @@ def notebook_paths(names=()) -> list[Path]:
     if names:
         unknown = set(names) - {p.stem for p in paths} - {p.name for p in paths}
         if unknown:
-            from tpvp.errors import ConfigError
-
             raise ConfigError(f"no notebook named {', '.join(sorted(unknown))}; choose from "
                               f"{', '.join(p.stem for p in paths)}")
         paths = [p for p in paths if p.stem in names or p.name in names]
@@ -80,8 +83,6 @@ def protocol_results(output, name: str, full: bool, run_full, cached_full, run_r
     unless every task is cached), else from the results ``make notebooks`` published, else
     ``run_reduced()``, labelled as a reduced run. Never numbers typed in by hand."""
     import pandas as pd
-
-    from tpvp.io import atomic_write_bytes
 
     output = Path(output)
     if full:
@@ -140,12 +141,22 @@ def run_notebook(path, full: bool, output, timeout: int | None = None):
     return notebook
 
 
-def mathjax_folder() -> Path:
-    """MathJax 2.7, shipped by the package jupyter-server-mathjax: the HTML copies and the site
-    render the notebooks' equations offline from a copy beside them."""
-    import jupyter_server_mathjax
+def mathjax_folder() -> Path | None:
+    """MathJax 2.7 as the package jupyter-server-mathjax ships it (environment.txt): the HTML
+    copies and the site render the notebooks' equations offline from a copy beside them. None when
+    it is not installed (the equations then stay as TeX text)."""
+    spec = importlib.util.find_spec("jupyter_server_mathjax")
+    for location in (spec.submodule_search_locations or []) if spec else []:
+        folder = Path(location) / "static"
+        if (folder / "MathJax.js").is_file() and (folder / "config" / "TeX-AMS-MML_HTMLorMML-full.js").is_file():
+            return folder
+    return None
 
-    return Path(jupyter_server_mathjax.__file__).parent / "static"
+
+def copy_mathjax(source: Path, target: Path) -> None:
+    """The parts of MathJax the pages use (no translations, tests or unpacked sources)."""
+    shutil.copytree(source, target, ignore=shutil.ignore_patterns("localization", "*.md", "test*", "unpacked"),
+                    dirs_exist_ok=True)
 
 
 def html_copy(notebook) -> str:
@@ -206,9 +217,6 @@ def run_notebooks(names=(), full: bool = False, destination=None, timeout: int |
     (default :func:`published_results`). Returns the manifest entries of this run."""
     import nbformat
 
-    from tpvp.io import atomic_write_text
-    from tpvp.io.publish import staged_folder
-
     paths = notebook_paths(names)
     destination = Path(destination or published_results()).absolute()
     mode = "full" if full else "reader"
@@ -232,8 +240,9 @@ def run_notebooks(names=(), full: bool = False, destination=None, timeout: int |
             if progress:
                 print(f"  {path.stem}: {seconds:.0f} s, {done[path.stem]['images']} figures, "
                       f"{done[path.stem]['tables']} tables", flush=True)
-        if not (stage.folder / MATHJAX / "MathJax.js").is_file():
-            shutil.copytree(mathjax_folder(), stage.folder / MATHJAX, dirs_exist_ok=True)
+        mathjax = mathjax_folder()
+        if mathjax is not None and not (stage.folder / MATHJAX / "MathJax.js").is_file():
+            copy_mathjax(mathjax, stage.folder / MATHJAX)
         manifest.update(done)
         atomic_write_text(stage.path(MANIFEST), json.dumps(manifest, indent=1) + "\n")
         atomic_write_text(stage.path("index.html"), _index_page(manifest))

@@ -16,13 +16,13 @@ repository's ``mkdocs.yml``) in strict mode:
 The site is published to ``destination`` through :func:`tpvp.io.publish.staged_folder`: an
 interrupted or failed build leaves the previous site whole. It needs no network: no web fonts,
 plotly.js is inline in the notebooks' outputs, search runs in the browser, and MathJax is a local
-copy (:func:`mathjax_source`) or, where none is installed, math stays as TeX text.
+copy (:func:`tpvp.experiments.notebooks.mathjax_folder`) or, where none is installed, math stays
+as TeX text.
 """
 
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import json
 import os
 import posixpath
@@ -34,7 +34,8 @@ import tempfile
 import time
 from pathlib import Path
 
-from tpvp.experiments.notebooks import MANIFEST, ROOT, notebook_paths
+from tpvp.errors import ConfigError
+from tpvp.experiments.notebooks import MANIFEST, ROOT, copy_mathjax, mathjax_folder, notebook_paths
 
 DOCS = ROOT / "docs"
 README = ROOT / "README.md"
@@ -49,12 +50,6 @@ _MATHJAX_LOCAL_CONFIG = """MathJax.Hub.Config({
 MathJax.Ajax.loadComplete("[MathJax]/config/local/tpvp.js");
 """
 _RUN_NOTEBOOKS = "python -m tpvp.experiments.notebooks"
-
-
-def _error(message: str):
-    from tpvp.errors import ConfigError
-
-    return ConfigError(message)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -142,7 +137,7 @@ def executed_notebooks(folder, allow_missing: bool = False) -> list[tuple[Path, 
         try:
             manifest = json.loads(manifest_path.read_text())
         except ValueError:
-            raise _error(f"{manifest_path} is not valid JSON; run {_RUN_NOTEBOOKS} --output {folder} again") from None
+            raise ConfigError(f"{manifest_path} is not valid JSON; run {_RUN_NOTEBOOKS} --output {folder} again") from None
     for stored in notebook_paths():
         executed = folder / f"{stored.stem}.ipynb"
         if executed.is_file():
@@ -154,7 +149,7 @@ def executed_notebooks(folder, allow_missing: bool = False) -> list[tuple[Path, 
         names = "" if not found else " " + " ".join(missing)
         full = f"make notebooks OUT={folder.parent}" if folder.name == "notebooks" else \
             f"{_RUN_NOTEBOOKS} --full --output {folder}{names}"
-        raise _error(f"{folder} has {what}; run `{full}` (the paper's protocol) or "
+        raise ConfigError(f"{folder} has {what}; run `{full}` (the paper's protocol) or "
                      f"`{_RUN_NOTEBOOKS} --output {folder}{names}` (reader's mode) first")
     return found
 
@@ -214,20 +209,9 @@ def _notebook_page(executed: Path, entry: dict, links: SiteLinks, target: Path) 
 # --------------------------------------------------------------------------------------------------
 
 
-def mathjax_source() -> Path | None:
-    """A local MathJax 2.7 to ship with the site: the copy in the ``jupyter-server-mathjax``
-    package (environment.txt); None when it is not installed (math then stays as TeX text)."""
-    spec = importlib.util.find_spec("jupyter_server_mathjax")
-    candidates = [Path(location) / "static" for location in (spec.submodule_search_locations or [])] if spec else []
-    for folder in candidates:
-        if (folder / "MathJax.js").is_file() and (folder / "config" / "TeX-AMS-MML_HTMLorMML-full.js").is_file():
-            return folder
-    return None
-
-
 def _copy_mathjax(source: Path, target: Path) -> None:
-    shutil.copytree(source, target, ignore=shutil.ignore_patterns("localization", "*.md", "test*", "unpacked"),
-                    dirs_exist_ok=True)
+    """MathJax with the site's local configuration (the STIX web fonts the copy ships)."""
+    copy_mathjax(source, target)
     local = target / "config" / "local"
     local.mkdir(parents=True, exist_ok=True)
     (local / "tpvp.js").write_text(_MATHJAX_LOCAL_CONFIG)
@@ -284,10 +268,10 @@ def assemble_sources(notebooks_folder, source: Path, *, docs=DOCS, readme=README
     if reference:
         nav.append({"Reference": reference})
     config["nav"] = nav
-    mathjax_folder = mathjax_source() if mathjax is True else (mathjax or None)
+    mathjax = mathjax_folder() if mathjax is True else (mathjax or None)
     mathjax_url = None
-    if mathjax_folder is not None:
-        _copy_mathjax(Path(mathjax_folder), docs_dir / MATHJAX_DIR)
+    if mathjax is not None:
+        _copy_mathjax(Path(mathjax), docs_dir / MATHJAX_DIR)
         mathjax_url = f"{MATHJAX_DIR}/MathJax.js?config={MATHJAX_CONFIG}"  # every page is at the top level
     for plugin in config.get("plugins", []):
         if isinstance(plugin, dict) and "mkdocs-jupyter" in plugin:
@@ -296,7 +280,7 @@ def assemble_sources(notebooks_folder, source: Path, *, docs=DOCS, readme=README
     config_path = source / "mkdocs.yml"
     config_path.write_text(yaml.safe_dump(config, sort_keys=False, allow_unicode=True))
     return {"config": config_path, "notebooks": modes, "pages": [next(iter(p.values())) for p in reference],
-            "mathjax": mathjax_folder}
+            "mathjax": mathjax}
 
 
 def _mkdocs_build(config: Path, site_dir: Path, strict: bool) -> None:
@@ -308,7 +292,7 @@ def _mkdocs_build(config: Path, site_dir: Path, strict: bool) -> None:
         lines = [line for line in (result.stderr + result.stdout).splitlines()
                  if line.startswith(("WARNING", "ERROR")) or "Aborted" in line or "Error" in line]
         shown = "; ".join(lines[:5]) or (result.stderr.strip().splitlines() or ["no output"])[-1]
-        raise _error(f"mkdocs build failed ({'strict mode: warnings are errors; ' if strict else ''}{shown})")
+        raise ConfigError(f"mkdocs build failed ({'strict mode: warnings are errors; ' if strict else ''}{shown})")
 
 
 def build_site(notebooks_folder, destination, *, docs=DOCS, readme=README, allow_missing: bool = False,
@@ -316,7 +300,7 @@ def build_site(notebooks_folder, destination, *, docs=DOCS, readme=README, allow
     """Build the site from the executed notebooks in ``notebooks_folder`` (see the module docstring)
     and publish it to ``destination`` whole. ``allow_missing``: build from the notebooks that are
     there (at least one) instead of failing. ``mathjax``: True finds a local copy
-    (:func:`mathjax_source`), a folder uses that one, None leaves math as text. Returns a summary:
+    (:func:`tpvp.experiments.notebooks.mathjax_folder`), a folder uses that one, None leaves math as text. Returns a summary:
     seconds, notebooks with their modes, reference pages, mathjax folder, destination."""
     from tpvp.io.publish import staged_folder
 
