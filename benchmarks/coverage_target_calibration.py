@@ -32,7 +32,7 @@ from concurrent.futures import ProcessPoolExecutor
 import numpy as np
 import pandas as pd
 
-from tpvp.config import make_config
+from tpvp.config import make_config, with_overrides
 from tpvp.experiments import plants
 
 CALIBRATION_TARGETS = (0.95, 0.97, 0.98, 0.985, 0.99, 0.995, 1.0)
@@ -53,7 +53,7 @@ def _calibrate_case(case, targets, nbv_method=None) -> list[dict]:
     shared = transfer(scene, config)
     rows = []
     for target in targets:
-        result = run_case(scene, make_config("plant", plants.to_flat(config) | {
+        result = run_case(scene, with_overrides(config, {
             "selection.coverage_target": target, "selection.planning_miss_ratio": 1.0}), transferred=shared)
         rows.append({**case.labels(), "target": target, "views": result.n_views, "coverage": result.coverage,
                      "path_length_m": result.path_length, "optimal": result.selection.optimal})

@@ -1,10 +1,10 @@
 """The import graph of tpvp/, read from the code (no import is executed): cycles between modules,
 upward imports (a stage package importing ``learning`` or ``experiments``, ``learning`` importing
-``experiments``) and imports of tpvp modules inside functions, per file.
+``experiments``), imports of tpvp modules inside functions, and private names (``_x``) imported
+from another package (by tpvp/ and benchmarks/).
 
-``python benchmarks/import_graph.py`` prints the three tables and a summary line; it is the
-measurement behind issue 25's layering targets (0 cycles, 0 upward imports, <= 20 function-local
-imports), not a test.
+``python benchmarks/import_graph.py`` prints the tables and a summary line; ``tests/test_layers.py``
+holds the layering rules (docs/architecture.md) to :func:`analyse`.
 """
 
 from __future__ import annotations
@@ -12,11 +12,13 @@ from __future__ import annotations
 import ast
 import sys
 from collections import Counter
+from dataclasses import dataclass
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent / "tpvp"
+BENCHMARKS = Path(__file__).resolve().parent
 TOP = ("cli", "__main__", "experiments")  # may import anything below them
-ABOVE_STAGES = ("learning", "experiments", "cli", "__main__")
+ABOVE_STAGES = ("config", "learning", "experiments", "cli", "__main__")
 
 
 def module_name(path: Path) -> str:
@@ -24,10 +26,10 @@ def module_name(path: Path) -> str:
     return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
 
 
-def imports(path: Path) -> list[tuple[list[str], bool]]:
-    """``(imported tpvp names, inside a function?)`` for every import statement of a tpvp module;
-    for ``from a.b import c`` the name is ``a.b.c`` (a submodule, or a name that :func:`main`
-    resolves to its module ``a.b``)."""
+def imports(path: Path) -> list[tuple[list[str], bool, int]]:
+    """``(imported tpvp names, inside a function?, line)`` for every import statement of a tpvp
+    module; for ``from a.b import c`` the name is ``a.b.c`` (a submodule, or a name that
+    :func:`analyse` resolves to its module ``a.b``)."""
     tree = ast.parse(path.read_text(), str(path))
     package = module_name(path) if path.name == "__init__.py" else module_name(path).rpartition(".")[0]
     found = []
@@ -38,14 +40,14 @@ def imports(path: Path) -> list[tuple[list[str], bool]]:
             if isinstance(child, ast.Import):
                 names = [a.name for a in child.names if a.name.split(".")[0] == "tpvp"]
                 if names:
-                    found.append((names, inside))
+                    found.append((names, inside, child.lineno))
             elif isinstance(child, ast.ImportFrom):
                 base = child.module or ""
                 if child.level:
                     parent = package.split(".")[: len(package.split(".")) - child.level + 1]
                     base = ".".join(parent + ([base] if base else []))
                 if base.split(".")[0] == "tpvp":
-                    found.append(([f"{base}.{a.name}" for a in child.names], inside))
+                    found.append(([f"{base}.{a.name}" for a in child.names], inside, child.lineno))
             visit(child, inside)
 
     visit(tree, False)
@@ -108,8 +110,27 @@ def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
     return out
 
 
-def main() -> int:
-    files = sorted(ROOT.rglob("*.py"))
+@dataclass
+class Report:
+    cycles: list  # lists of modules
+    upward: set  # (importer, imported, "in a function" | "at the top")
+    local: list  # (file, line, source line) of function-local tpvp imports
+    private: list  # (file, line, imported private name) across packages
+
+
+def is_private(name: str) -> bool:
+    last = name.rpartition(".")[2]
+    return last.startswith("_") and not last.startswith("__")
+
+
+def package_of(module: str) -> str:
+    """``tpvp.nbv.methods`` -> ``tpvp.nbv``; top-level modules are their own package."""
+    parts = module.split(".")
+    return ".".join(parts[:2])
+
+
+def analyse(root: Path = ROOT, others=(BENCHMARKS,)) -> Report:
+    files = sorted(root.rglob("*.py"))
     modules = {module_name(p) for p in files}
 
     def resolve(target: str) -> str:
@@ -117,30 +138,49 @@ def main() -> int:
             target = target.rpartition(".")[0]
         return target
 
-    graph, local, up = {}, Counter(), set()
+    graph, local, up, private = {}, [], set(), []
     for path in files:
         source = module_name(path)
+        lines = path.read_text().splitlines()
         graph.setdefault(source, set())
-        for names, inside in imports(path):
+        for names, inside, line in imports(path):
             targets = {resolve(name) for name in names} - {"", source}
             if inside and targets:
-                local[path.relative_to(ROOT.parent).as_posix()] += 1
+                local.append((path.relative_to(root.parent).as_posix(), line, lines[line - 1].strip()))
             for target in targets:
                 graph[source].add(target)
                 if upward(source, target):
                     up.add((source, target, "in a function" if inside else "at the top"))
-    found = cycles(graph)
+            for name in names:
+                module = resolve(name)
+                if name != module and is_private(name) \
+                        and package_of(module) != package_of(source):
+                    private.append((path.relative_to(root.parent).as_posix(), line, name))
+    for folder in others:
+        for path in sorted(folder.rglob("*.py")):
+            for names, _, line in imports(path):
+                private += [(path.relative_to(root.parent).as_posix(), line, name) for name in names
+                            if is_private(name) and resolve(name) != name]
+    return Report(cycles(graph), up, local, private)
+
+
+def main() -> int:
+    report = analyse()
     print(f"{'cycle':>5}  modules")
-    for k, component in enumerate(found, 1):
+    for k, component in enumerate(report.cycles, 1):
         print(f"{k:>5}  {len(component)}: {', '.join(component)}")
     print(f"\n{'upward import':<60} where")
-    for source, target, where in sorted(up):
+    for source, target, where in sorted(report.upward):
         print(f"{source + ' -> ' + target:<60} {where}")
     print(f"\n{'function-local tpvp import statements':<45} count")
-    for file, count in local.most_common():
+    for file, count in Counter(file for file, _, _ in report.local).most_common():
         print(f"{file:<45} {count}")
-    print(f"\n{len(found)} cycles ({sum(map(len, found))} modules), {len(up)} upward imports, "
-          f"{sum(local.values())} function-local tpvp import statements in {len(local)} files")
+    print(f"\n{'private name imported across packages':<60} where")
+    for file, line, name in report.private:
+        print(f"{name:<60} {file}:{line}")
+    print(f"\n{len(report.cycles)} cycles ({sum(map(len, report.cycles))} modules), {len(report.upward)} upward "
+          f"imports, {len(report.local)} function-local tpvp import statements in "
+          f"{len({f for f, _, _ in report.local})} files, {len(report.private)} private names imported across packages")
     return 0
 
 

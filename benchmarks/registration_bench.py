@@ -23,7 +23,7 @@ import numpy as np
 
 from tpvp.registration import EDConfig, register_embedded_deformation
 from tpvp.registration.autograd_reference import optimise_autograd
-from tpvp.registration.embedded_deformation import _register
+from tpvp.registration.embedded_deformation import register_embedded_deformation
 from tpvp.scene import voxels
 from tpvp.scene.normalise import normalise_plant
 from tpvp.scene.samples import load_sample
@@ -76,7 +76,7 @@ def main(argv=None) -> int:
     register_embedded_deformation(P, Q, EDConfig(iterations=2))
     warm = time.perf_counter() - t0
     if reference:
-        _register(P, Q, EDConfig(iterations=2), optimise_autograd)
+        register_embedded_deformation(P, Q, EDConfig(iterations=2), optimise_autograd)
 
     cases = [("real tomato 03-05 -> 03-06", _real_pair)]
     for species in ("tomato", "maize"):
@@ -97,7 +97,7 @@ def main(argv=None) -> int:
         worst = max(worst, r.seconds)
         ref_sec = ref_cd = ref_corr = float("nan")
         if reference:
-            ref = _register(P, Q, config, optimise_autograd)
+            ref = register_embedded_deformation(P, Q, config, optimise_autograd)
             ref_sec, ref_cd, ref_corr = ref.seconds, ref.chamfer_after * 1e3, _correspondence_mm(ref.warped, gt)
             worst_ratio = max(worst_ratio, r.chamfer_after * 1e3 / ref_cd)
         print(f"{name:27s} {len(P):6d} {len(Q):5d} {r.n_nodes:5d} | {r.seconds:5.2f} {_fmt(ref_sec, 7, 2)} "

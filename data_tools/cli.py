@@ -13,7 +13,7 @@ import sys
 from pathlib import Path
 
 from data_tools.kaggle_download import KAGGLE_DATASET
-from tpvp.cli import run_command
+from tpvp.errors import run_command
 from tpvp.errors import TpvpError
 
 

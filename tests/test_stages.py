@@ -88,7 +88,7 @@ def test_a_dummy_selection_method_sees_the_problem_and_its_choice_is_executed(sc
     seen = {}
 
     def every_view(problem, config):
-        seen["target"] = problem.coverage_target
+        seen["target"] = problem.planning_target
         seen["shape"] = problem.visibility.shape
         seen["occupancy"] = problem.nbv.occupancy is not None and problem.nbv.view_state.sum() == len(problem.executed)
         views = np.setdiff1d(np.arange(len(problem.view_space)), problem.executed)

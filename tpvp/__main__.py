@@ -72,7 +72,7 @@ def run_checked(prog: str, load_main) -> int:
 
 
 def _load_main():
-    from tpvp.cli import main
+    from tpvp.cli import main  # after the dependency check: a missing package is one line, not a traceback
 
     return main
 

@@ -11,7 +11,27 @@ import sys
 from pathlib import Path
 
 from tpvp import __version__
-from tpvp.errors import TpvpError
+from tpvp.config import SCALES, UP_AXES, config_yaml, derived_table, load_config, parse_overrides
+from tpvp.errors import TpvpError, run_command
+from tpvp.experiments import plants as plant_experiments
+from tpvp.experiments import rows as row_experiments
+from tpvp.experiments.frontier import coverage_frontier, write_frontier_files
+from tpvp.experiments.greenhouse import build_row_scene, run_row_case
+from tpvp.experiments.outputs import write_case_outputs, write_row_case_outputs
+from tpvp.experiments.render_demo import RenderDemoConfig, run_render_demo
+from tpvp.experiments.rows import RowCase, dataset_cases
+from tpvp.experiments.single_plant import build_scene, run_case, transfer
+from tpvp.io import atomic_write_text, read_point_cloud
+from tpvp.io.publish import staged_folder
+from tpvp.jit import compile_kernels
+from tpvp.scene.samples import load_sample
+from tpvp.viewspace import get_view_space, view_space_choices
+
+# One rule for plants and rows (selection.coverage_target, SelectionConfig.planning_target).
+COVERAGE_TARGET_HELP = ("true coverage of today's plants to aim for, e.g. 0.98: the fewest views that see "
+                        "1 - r x (1 - target) of the predicted planning surface (exact partial set cover; r per "
+                        "view space, selection.planning_miss_ratio: 0.5 hemisphere, 0.25 sphere and rooms); "
+                        "1.0 = the paper's full set cover (default: the configuration's, 1.0)")
 
 STAGES = ["compile", "scene", "warm-up NBV", "registration", "inflation", "visibility", "view selection",
           "path", "outputs"]
@@ -39,8 +59,6 @@ def _print_case(result, summary, folder, compile_seconds):
 
 def _config(args):
     """The resolved configuration: --config, then the dedicated options, then --set overrides."""
-    from tpvp.config import load_config, parse_overrides
-
     overrides = {}
     initial = getattr(args, "initial_view", None)
     if initial is not None and initial.lstrip("-").isdigit():
@@ -53,7 +71,6 @@ def _config(args):
             overrides[key] = value
     overrides.update(parse_overrides(args.set))
     config = load_config(args.config, overrides)
-    from tpvp.viewspace import get_view_space
 
     get_view_space(config.view_space).view_index(config.initial_view)  # refuse before any work
     return config
@@ -70,11 +87,6 @@ def _print_frontier(frontier) -> None:
 
 def _run_pair(previous, current, output, config, name="case", inputs=(), names=None, frontier=False):
     from tqdm.auto import tqdm
-
-    from tpvp.experiments.outputs import write_case_outputs
-    from tpvp.experiments.single_plant import build_scene, run_case, transfer
-    from tpvp.io.publish import staged_folder
-    from tpvp.jit import compile_kernels
 
     frontier_table = None
     with staged_folder(output, inputs=inputs) as stage, \
@@ -95,8 +107,6 @@ def _run_pair(previous, current, output, config, name="case", inputs=(), names=N
         summary = json.loads(written["results"].read_text())
         bar.update(1)
         if frontier:
-            from tpvp.experiments.frontier import coverage_frontier, write_frontier_files
-
             bar.set_postfix_str("frontier")
             frontier_table = coverage_frontier(scene, config, transferred=shared)
             write_frontier_files(stage.folder, frontier_table, name)
@@ -116,8 +126,6 @@ def _run_pair(previous, current, output, config, name="case", inputs=(), names=N
 
 
 def _demo(args) -> int:
-    from tpvp.scene.samples import load_sample
-
     config = _config(args)
     print("bundled real tomato (Pheno4D): previous session 2020-03-05, current 2020-03-06, "
           f"{config.view_space} view space, configuration {config.name!r}")
@@ -126,8 +134,6 @@ def _demo(args) -> int:
 
 
 def _plan(args) -> int:
-    from tpvp.io import read_point_cloud
-
     config = _config(args)
     previous, previous_units = read_point_cloud(args.previous, units=args.units, return_units=True,
                                                 drop_invalid=args.drop_invalid)
@@ -140,10 +146,6 @@ def _plan(args) -> int:
 
 
 def _render(args) -> int:
-    from tpvp.experiments.render_demo import RenderDemoConfig, run_render_demo
-    from tpvp.io import atomic_write_text
-    from tpvp.io.publish import staged_folder
-
     with staged_folder(args.output) as stage:
         table, summary = run_render_demo(RenderDemoConfig(view_space=args.view_space, model=args.model),
                                          output=stage.folder)
@@ -164,8 +166,6 @@ def _render(args) -> int:
 
 
 def _show_config(args) -> int:
-    from tpvp.config import config_yaml, derived_table
-
     config = _config(args)
     print(config_yaml(config, f"resolved configuration {config.name!r} (setting: {config.setting})"), end="")
     if args.derived:
@@ -176,27 +176,23 @@ def _show_config(args) -> int:
 
 
 def _experiments_plants(args) -> int:
-    from tpvp.experiments import plants
-
     config = _config(args)
-    cases = plants.default_cases(args.quick, args.dataset, args.plants, args.pairs, args.paper_subset,
+    cases = plant_experiments.default_cases(args.quick, args.dataset, args.plants, args.pairs, args.paper_subset,
                                  tuple(args.view_spaces), tuple(args.rotations), tuple(args.initial_views))
-    methods = args.methods or list(plants.ALL_METHODS)
+    methods = args.methods or list(plant_experiments.ALL_METHODS)
     where = f"the Dask cluster {args.scheduler}" if args.scheduler else f"{args.workers} local worker(s)"
     print(f"{len(cases)} cases x {len(methods)} methods on {where}; cache {args.cache}")
-    raw = plants.run_experiments(cases, methods, config, cache_dir=args.cache, workers=args.workers,
+    raw = plant_experiments.run_experiments(cases, methods, config, cache_dir=args.cache, workers=args.workers,
                                  scheduler=args.scheduler)
-    comparison = plants.comparison_case(cases) if args.comparison else None
-    written = plants.write_results(args.output, raw, config, comparison=comparison)
-    print(plants.markdown(written["table1_coverage_effort"]))
+    comparison = plant_experiments.comparison_case(cases) if args.comparison else None
+    written = plant_experiments.write_results(args.output, raw, config, comparison=comparison)
+    print(plant_experiments.markdown(written["table1_coverage_effort"]))
     print(f"wrote {Path(args.output).absolute()}/ (raw_cases.csv, {', '.join(f'{n}.csv/.md' for n in written)}, "
           f"paper_values.csv, figures/{', comparison/' if comparison else ''})")
     return 0
 
 
 def _row_config(args):
-    from tpvp.config import load_config, parse_overrides
-
     overrides = {"view_space": getattr(args, "room", "room1")}
     if args.cover_resolution is not None:
         overrides["selection.cover_resolution"] = args.cover_resolution
@@ -213,11 +209,6 @@ def _row_config(args):
 
 def _greenhouse(args) -> int:
     from tqdm.auto import tqdm
-
-    from tpvp.experiments.greenhouse import build_row_scene, run_row_case
-    from tpvp.experiments.outputs import write_row_case_outputs
-    from tpvp.experiments.rows import RowCase, dataset_cases
-    from tpvp.io.publish import staged_folder
 
     config = _row_config(args)
     if args.dataset is not None:
@@ -272,20 +263,17 @@ def _greenhouse(args) -> int:
 
 
 def _experiments_rows(args) -> int:
-    from tpvp.experiments import rows
-
     config = _row_config(args)
-    cases = rows.default_row_cases(args.quick, args.dataset, tuple(args.rooms))
-    settings = rows.quick_settings() if args.quick else rows.RowSettings()
-    methods = args.methods or list(rows.ALL_METHODS)
+    cases = row_experiments.default_row_cases(args.quick, args.dataset, tuple(args.rooms))
+    settings = row_experiments.quick_settings() if args.quick else row_experiments.RowSettings()
+    methods = args.methods or list(row_experiments.ALL_METHODS)
     where = f"the Dask cluster {args.scheduler}" if args.scheduler else f"{args.workers} local worker(s)"
     print(f"{len(cases)} cases x {len(methods)} methods on {where}; cache {args.cache}")
-    raw = rows.run_row_experiments(cases, methods, config, settings, cache_dir=args.cache, workers=args.workers,
+    raw = row_experiments.run_row_experiments(cases, methods, config, settings, cache_dir=args.cache, workers=args.workers,
                                    scheduler=args.scheduler)
-    written = rows.write_results(args.output, raw, config, settings)
-    from tpvp.experiments.plants import markdown
+    written = row_experiments.write_results(args.output, raw, config, settings)
 
-    print(markdown(written["table6_coverage_effort"]))
+    print(plant_experiments.markdown(written["table6_coverage_effort"]))
     print(f"wrote {Path(args.output).absolute()}/ (raw_cases.csv, {', '.join(f'{n}.csv/.md' for n in written)}, "
           f"paper_values.csv, figures/)")
     return 0
@@ -303,14 +291,11 @@ def _row_options(p, output):
     p.add_argument("--cover-resolution", type=float, default=None, metavar="M",
                    help="covering voxel of the set cover (paper: 0.10, 0.05, 0.04, 0.03; default: the "
                         "configuration's, 0.04)")
-    p.add_argument("--coverage-target", type=float, default=None, metavar="FRACTION",
-                   help="fraction of the planning surface to see (exact partial set cover; default 1.0)")
+    p.add_argument("--coverage-target", type=float, default=None, metavar="FRACTION", help=COVERAGE_TARGET_HELP)
     p.add_argument("--quick", action="store_true", help="coarse ground truth (2 cm) for a fast look")
 
 
 def _view_space_arg(value: str) -> str:
-    from tpvp.viewspace import get_view_space
-
     try:
         get_view_space(value)  # one clear error line for an unknown name or a bad file
     except TpvpError as exc:
@@ -319,9 +304,6 @@ def _view_space_arg(value: str) -> str:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from tpvp.config import SCALES, UP_AXES
-    from tpvp.viewspace import view_space_choices
-
     parser = argparse.ArgumentParser(prog="tpvp", description=__doc__.splitlines()[0])
     parser.add_argument("--version", action="version", version=f"tpvp {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -334,11 +316,7 @@ def build_parser() -> argparse.ArgumentParser:
         p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                        help="override one configuration key, e.g. --set registration.embedded_deformation.iterations=100 "
                             "(repeatable; `tpvp config --derived` lists the keys)")
-        p.add_argument("--coverage-target", default=None, type=float, metavar="FRACTION",
-                       help="coverage of today's plant to aim for, e.g. 0.98: the fewest views that see "
-                            "1 - r x (1 - target) of the predicted planning surface (exact partial set cover; r "
-                            "calibrated per view space, selection.planning_miss_ratio); 1.0 = the paper's full set "
-                            "cover (default: the configuration's, 1.0)")
+        p.add_argument("--coverage-target", default=None, type=float, metavar="FRACTION", help=COVERAGE_TARGET_HELP)
         if not case_options:
             return
         p.add_argument("--frontier", action="store_true",
@@ -436,21 +414,6 @@ def build_parser() -> argparse.ArgumentParser:
     show.add_argument("--derived", action="store_true", help="also list the derived parameters and their rules")
     show.set_defaults(func=_show_config)
     return parser
-
-
-def run_command(args, name: str) -> int:
-    """Run ``args.func(args)``; a TpvpError becomes one line ``<name>: error: ...`` on stderr and
-    its exit status (2 bad input, 3 destination busy, 4 outputs not written), Ctrl-C one line saying
-    whether the outputs were published and exit status 130 (docs/cli.md: exit status)."""
-    try:
-        return args.func(args)
-    except TpvpError as exc:
-        print(f"{name}: error: {exc}", file=sys.stderr)
-        return exc.exit_code
-    except KeyboardInterrupt as exc:
-        report = exc.report() if hasattr(exc, "report") else "interrupted before any output was written"
-        print(f"{name}: {report}", file=sys.stderr)
-        return 130
 
 
 def main(argv=None) -> int:

@@ -23,11 +23,15 @@ from pathlib import Path
 from tpvp.errors import ConfigError, InputFileError
 from tpvp.inflation import InflationConfig
 from tpvp.nbv import OccupancyMapConfig
+from tpvp.nbv.methods import NBV_METHODS
 from tpvp.path.tsp import TspConfig
 from tpvp.registration import EDConfig
+from tpvp.registration.methods import REGISTRATION_METHODS
 from tpvp.registration.warp_field import WarpFieldConfig
 from tpvp.sensor.sensor import SensorConfig
 from tpvp.setcover import SetCoverConfig
+from tpvp.setcover.methods import SELECTION_METHODS
+from tpvp.viewspace import get_view_space
 
 SCALES = ("normalised", "native")
 UP_AXES = ("+z", "-z", "+y", "-y", "+x", "-x")
@@ -113,8 +117,9 @@ class RegistrationConfig:
 # *predicted* planning surface, per view space: planning target = 1 - ratio x (1 - target).
 # Calibrated on generated pairs of seeds 10-12 (never the evaluation seeds 0-2) for a 98 % request:
 # the largest ratio whose mean true coverage reaches it with no case more than one point below,
-# with either warm-up NBV (geometric or prior). Other view spaces take the smallest. docs/cli.md,
-# "Asking for a coverage level"; benchmarks/coverage_target_calibration.py.
+# with either warm-up NBV (geometric or prior). Other view spaces (the greenhouse rooms, view-space
+# files) take the smallest, the most cautious: not calibrated there. docs/cli.md, "Asking for a
+# coverage level"; benchmarks/coverage_target_calibration.py.
 CALIBRATED_MISS_RATIO = {"hemisphere": 0.5, "sphere": 0.25}
 
 
@@ -142,7 +147,9 @@ class SelectionConfig:
             _positive(self, "planning_miss_ratio")
 
     def planning_target(self, view_space: str) -> float:
-        """The fraction of the planning surface the selected views must see in ``view_space``."""
+        """The fraction of the *predicted planning surface* the selected views must see in
+        ``view_space`` for ``coverage_target`` of today's plant (resolved, never stored in
+        ``coverage_target``): ``1 - r x (1 - coverage_target)``."""
         if self.coverage_target >= 1.0:
             return 1.0
         ratio = self.planning_miss_ratio
@@ -191,7 +198,6 @@ class PlantConfig:
         """Whether the scene has a table: ``scene.table`` if set, else the view space's choice."""
         if self.scene.table is not None:
             return bool(self.scene.table)
-        from tpvp.viewspace import get_view_space
 
         return get_view_space(self.view_space).table
 
@@ -276,8 +282,6 @@ DERIVED = {
 
 
 def _view_space_range(spec) -> float:
-    from tpvp.viewspace import get_view_space
-
     if not isinstance(spec, str):
         raise ConfigError(f"configuration key 'view_space': expected a name or a file path, got {spec!r}")
     try:
@@ -364,6 +368,15 @@ def _known_keys(cls) -> set:
     return set(flatten_keys(to_dict(cls())))
 
 
+def with_overrides(config, overrides: dict):
+    """``config`` (a resolved configuration) with dotted-key ``overrides`` applied, checked and
+    coerced as :func:`make_config` does; every other value stays as it is (nothing re-derived)."""
+    if not overrides:
+        return config
+    setting = next(name for name, cls in SETTINGS.items() if isinstance(config, cls))
+    return make_config(setting, flatten_keys(to_dict(config)) | dict(overrides))
+
+
 def make_config(setting: str = "plant", overrides: dict | None = None, **keywords):
     """A resolved configuration of ``setting`` (``plant`` or ``row``) with dotted-key ``overrides``
     (``{"registration.embedded_deformation.iterations": 100}``) and top-level ``keywords``
@@ -397,10 +410,6 @@ def make_config(setting: str = "plant", overrides: dict | None = None, **keyword
 
 def _check_methods(config) -> None:
     """Method names must be registered (the registries import their packages lazily)."""
-    from tpvp.nbv.methods import NBV_METHODS
-    from tpvp.registration.methods import REGISTRATION_METHODS
-    from tpvp.setcover.methods import SELECTION_METHODS
-
     for registry, name, key in ((NBV_METHODS, config.nbv.method, "nbv.method"),
                                 (REGISTRATION_METHODS, config.registration.method, "registration.method"),
                                 (SELECTION_METHODS, config.selection.method, "selection.method")):

@@ -6,6 +6,8 @@ file or argument. The CLI prints the message on one line and exits with status 2
 a traceback.
 """
 
+import sys
+
 
 class TpvpError(Exception):
     """Base class of all errors caused by input the user can fix."""
@@ -57,3 +59,18 @@ def checked_cloud(points, name: str = "point cloud"):
     if not np.all(np.isfinite(points)):
         raise PointCloudError(f"{name} contains NaN or infinite coordinates")
     return points
+
+
+def run_command(args, name: str) -> int:
+    """Run ``args.func(args)``; a TpvpError becomes one line ``<name>: error: ...`` on stderr and
+    its exit status (2 bad input, 3 destination busy, 4 outputs not written), Ctrl-C one line saying
+    whether the outputs were published and exit status 130 (docs/cli.md: exit status)."""
+    try:
+        return args.func(args)
+    except TpvpError as exc:
+        print(f"{name}: error: {exc}", file=sys.stderr)
+        return exc.exit_code
+    except KeyboardInterrupt as exc:
+        report = exc.report() if hasattr(exc, "report") else "interrupted before any output was written"
+        print(f"{name}: {report}", file=sys.stderr)
+        return 130

@@ -8,6 +8,7 @@ import sys
 from datetime import datetime, timezone
 from importlib import metadata
 from pathlib import Path
+from tpvp import __version__
 
 LIBRARIES = ("numpy", "scipy", "numba", "torch", "open3d-cpu", "trimesh", "PuLP", "highspy", "pandas",
              "matplotlib", "PyYAML", "rerun-sdk")
@@ -39,8 +40,6 @@ def library_versions() -> dict:
 
 def provenance(config, seeds: dict | None = None, argv=None) -> dict:
     """Everything needed to re-run a result: with the resolved configuration written beside it."""
-    from tpvp import __version__
-
     return {
         "tpvp_version": __version__,
         "git_commit": git_commit(),

@@ -2,11 +2,36 @@
 
 A new method is one function plus one ``@REGISTRY.register("name")`` line; configurations and the
 CLI refer to it by name, and the experiment code never changes.
+
+Packages above the stages add methods without a stage importing them: a *plugin* module registers
+its methods when imported, and a registry imports the plugins the first time it is asked for a name
+it does not hold (or for the list of names). Plugins are tpvp's learned planners
+(:mod:`tpvp.learning.methods`) and any module another package declares under the entry-point group
+``tpvp.plugins`` (``[project.entry-points."tpvp.plugins"] name = "package.module"``).
 """
 
 from __future__ import annotations
 
+import importlib
+from importlib.metadata import entry_points
+
 from tpvp.errors import ConfigError
+
+BUILTIN_PLUGINS = ("tpvp.learning.methods",)
+PLUGIN_GROUP = "tpvp.plugins"
+_plugins_loaded = False
+
+
+def load_plugins() -> None:
+    """Import every plugin module once (each registers its methods)."""
+    global _plugins_loaded
+    if _plugins_loaded:
+        return
+    _plugins_loaded = True
+    modules = list(BUILTIN_PLUGINS)
+    modules += [e.value for e in entry_points(group=PLUGIN_GROUP) if e.value not in modules]
+    for module in modules:
+        importlib.import_module(module)
 
 
 class Registry:
@@ -34,16 +59,21 @@ class Registry:
 
     def get(self, name: str):
         """The entry called ``name``; an unknown name is one :class:`ConfigError` line listing the choices."""
+        if isinstance(name, str) and name not in self._entries:
+            load_plugins()
         try:
             return self._entries[name]
         except (KeyError, TypeError):
             raise ConfigError(f"unknown {self.kind} {name!r}; choose one of {', '.join(self.names())}") from None
 
     def names(self) -> list[str]:
+        load_plugins()
         return sorted(self._entries)
 
     def help(self, name: str) -> str:
         return self._help.get(name, "")
 
     def __contains__(self, name) -> bool:
+        if name not in self._entries:
+            load_plugins()
         return name in self._entries

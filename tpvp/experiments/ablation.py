@@ -18,19 +18,20 @@ import numpy as np
 import pandas as pd
 from scipy import sparse
 
-from tpvp.config import make_config
-from tpvp.experiments.plants import _mean_std, default_cases, method_config, to_flat
+from tpvp.config import with_overrides
+from tpvp.experiments.plants import _mean_std, default_cases, method_config
 from tpvp.experiments.single_plant import planning_visibility, run_case, transfer
+from tpvp.inflation.inflate import SURFACE_LAYERS as ORIGINS
 from tpvp.metrics.geometry import chamfer_distance, nearest_distances
 from tpvp.scene import voxels
 from tpvp.visibility import covered_voxels
+from tpvp.viz.ablation import paired_cases  # noqa: F401 (Tables III and IV per case)
 
 #: The four methods of Tables III and IV (their overrides: ``plants.ONE_SHOT_OVERRIDES``).
 ABLATION_METHODS = ["ours", "ours-no-inflation", "initial-view-only", "initial-view-only-no-inflation"]
 
 #: Origin labels of a planning-surface voxel, in the order of precedence (a voxel occupied by
 #: several layers takes the first one's label).
-ORIGINS = ("transferred P~", "coarse Q", "inflation I")
 
 
 def example_case(species: str = "maize", view_space: str = "sphere"):
@@ -128,7 +129,7 @@ class InflationAblation:
 def inflation_ablation(scene, config, transferred=None) -> InflationAblation:
     """Plan ``scene`` with ``config`` (inflation on) and with inflation off, from one shared warm-up
     and registration (``transferred``, computed when not given), and compare the two plans."""
-    config = make_config("plant", {**to_flat(config), "inflation.enabled": True})
+    config = with_overrides(config, {"inflation.enabled": True})
     transferred = transferred or transfer(scene, config)
     with_inflation = run_case(scene, config, transferred=transferred)
     without = run_case(scene, method_config(config, "ours-no-inflation"), transferred=transferred)
@@ -243,7 +244,7 @@ def registration_ablation(scene, config, transfers: dict | None = None) -> list:
     for count, label, (with_method, without_method) in (
             (0, "initial view only", ("initial-view-only", "initial-view-only-no-inflation")),
             (warm_ups, f"initial view + {warm_ups} warm-up NBV", ("ours", "ours-no-inflation"))):
-        base = make_config("plant", {**to_flat(config), "nbv.warm_up_views": count})
+        base = with_overrides(config, {"nbv.warm_up_views": count})
         with_config, without_config = (method_config(base, m) for m in (with_method, without_method))
         transferred = transfers.get(count) or transfer(scene, with_config)
         warped = transferred.alignment.warped
@@ -293,15 +294,6 @@ def pooled_table(raw: pd.DataFrame, methods=ABLATION_METHODS) -> pd.DataFrame:
     sources = {source: i for i, source in enumerate(dict.fromkeys(rows["source"]))}  # as they come
     return table.sort_values(["source", "method"], key=lambda c: c.map(order if c.name == "method" else sources),
                              kind="stable").reset_index(drop=True)
-
-
-def paired_cases(raw: pd.DataFrame, method_a: str, method_b: str, value: str) -> pd.DataFrame:
-    """``value`` of two methods side by side per case (columns ``method_a`` and ``method_b``),
-    one row per case both ran."""
-    keys = [k for k in ("source", "instance", "species", "view_space", "rotation_deg", "initial_view") if k in raw]
-    rows = raw[raw["method"].isin([method_a, method_b])]
-    table = rows.pivot_table(index=keys, columns="method", values=value, aggfunc="first").reset_index()
-    return table.dropna(subset=[m for m in (method_a, method_b) if m in table])
 
 
 # --------------------------------------------------------------------------------------------------

@@ -27,6 +27,11 @@ from tpvp.path.local import local_path_lengths, local_path_points, obstacle_radi
 from tpvp.path.tsp import shortest_open_path
 from tpvp.setcover.maxcover import max_coverage
 from tpvp.visibility import coverage_ratio, covered_voxels
+from tpvp.io import atomic_write_text
+from tpvp.io.publish import staged_folder
+from tpvp.viz.experiments import plot_method_comparison
+from tpvp.viz.interactive import scene_3d
+from tpvp.viz.recording import write_recording
 
 
 @dataclass(frozen=True, eq=False)
@@ -91,8 +96,6 @@ def compare_methods(scene: Scene, config: PlantConfig, views: int | None = None)
 def write_comparison(folder, scene: Scene, config: PlantConfig, views: int | None = None, title: str = "") -> dict:
     """The comparison figure (PNG), a table of the three plans (CSV) and a rerun recording, written
     into ``folder`` as one published folder."""
-    from tpvp.io.publish import staged_folder
-
     with staged_folder(folder) as stage:
         written = write_comparison_files(stage.folder, scene, config, views, title)
     folder = Path(folder)
@@ -104,10 +107,6 @@ def write_comparison_files(folder, scene: Scene, config: PlantConfig, views: int
     """:func:`write_comparison` into a folder being staged by the caller (atomic files, no folder
     publication of its own)."""
     import pandas as pd
-
-    from tpvp.io import atomic_write_text
-    from tpvp.viz.experiments import plot_method_comparison
-    from tpvp.viz.recording import write_recording
 
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
@@ -130,8 +129,6 @@ def write_comparison_files(folder, scene: Scene, config: PlantConfig, views: int
 def comparison_3d(scene: Scene, plan: ComparedPlan, title: str = ""):
     """An interactive (plotly) view of one compared plan: the plant voxels it covered (blue) and
     the observable ones it missed (red), its views in execution order and its path."""
-    from tpvp.viz.interactive import scene_3d
-
     plant = scene.grid.countable
     observable = np.zeros(scene.grid.size, bool)
     observable[scene.oracle] = True

@@ -8,13 +8,18 @@ it); each target then costs one selection (exact partial set cover) and one path
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pandas as pd
 
-from tpvp.config import PlantConfig, make_config
+from tpvp.config import PlantConfig, with_overrides
 from tpvp.errors import ConfigError
 from tpvp.experiments.baselines import optimum
 from tpvp.experiments.single_plant import Scene, run_case, transfer
+from tpvp.io import atomic_write_text
+from tpvp.io.publish import staged_folder
+from tpvp.viz.experiments import plot_frontier
 
 DEFAULT_TARGETS = (0.90, 0.92, 0.94, 0.95, 0.96, 0.97, 0.98, 0.99, 0.995, 1.0)
 FRONTIER_COLUMNS = ("target", "views", "coverage", "path_length_m", "selection_optimal", "optimum_views",
@@ -26,17 +31,14 @@ def coverage_frontier(scene: Scene, config: PlantConfig, targets=DEFAULT_TARGETS
     the initial and warm-up views, true coverage of the oracle, path in m) and the exact optimum
     on the ground truth for t of the oracle (``optimum_*``), from the same initial view.
     ``transferred``: the case's :func:`transfer` when already computed."""
-    from tpvp.config import flatten_keys, to_dict
-
     values = sorted({float(t) for t in np.atleast_1d(np.asarray(targets, dtype=float))})
     if not values or values[0] <= 0 or values[-1] > 1:
         raise ConfigError(f"coverage targets must be fractions in (0, 1], got {list(targets)!r}")
-    flat = flatten_keys(to_dict(config))
     shared = transferred or transfer(scene, config)
     best = optimum(scene, config, targets=tuple(values)).set_index("target")
     rows = []
     for target in values:
-        result = run_case(scene, make_config("plant", flat | {"selection.coverage_target": target}),
+        result = run_case(scene, with_overrides(config, {"selection.coverage_target": target}),
                           transferred=shared)
         limit = best.loc[target]
         rows.append({"target": target, "views": result.n_views, "coverage": result.coverage,
@@ -49,11 +51,6 @@ def coverage_frontier(scene: Scene, config: PlantConfig, targets=DEFAULT_TARGETS
 def write_frontier_files(folder, frontier: pd.DataFrame, title: str = "") -> dict:
     """``frontier.csv`` and ``frontier.png`` of a :func:`coverage_frontier` table in ``folder``
     (each file written atomically; ``folder`` is usually a staged output folder)."""
-    from pathlib import Path
-
-    from tpvp.io import atomic_write_text
-    from tpvp.viz.experiments import plot_frontier
-
     folder = Path(folder)
     atomic_write_text(folder / "frontier.csv", frontier.to_csv(index=False))
     plot_frontier(folder / "frontier.png", frontier, title)
@@ -63,10 +60,6 @@ def write_frontier_files(folder, frontier: pd.DataFrame, title: str = "") -> dic
 def write_frontier(folder, scene: Scene, config: PlantConfig, targets=DEFAULT_TARGETS, title: str = "") -> dict:
     """:func:`coverage_frontier` as ``frontier.csv`` and ``frontier.png`` in ``folder`` (published
     whole or not at all)."""
-    from pathlib import Path
-
-    from tpvp.io.publish import staged_folder
-
     frontier = coverage_frontier(scene, config, targets)
     with staged_folder(folder) as stage:
         write_frontier_files(stage.folder, frontier, title)

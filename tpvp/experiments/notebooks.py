@@ -30,7 +30,7 @@ from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
 
-from tpvp.errors import ConfigError
+from tpvp.errors import ConfigError, run_command
 from tpvp.io import atomic_write_bytes, atomic_write_text
 from tpvp.io.publish import staged_folder
 
@@ -256,7 +256,6 @@ def main(argv=None) -> int:
                         help="the paper's full protocol (make notebooks; about an hour on 2 cores with cold caches)")
     parser.add_argument("--output", default=None, help="publish here (default: outputs/notebooks in the repository)")
     args = parser.parse_args(argv)
-    from tpvp.cli import run_command
 
     args.func = lambda a: run_notebooks(a.names, a.full, a.output) and 0
     return run_command(args, "notebooks")

@@ -14,11 +14,12 @@ from tpvp.config import config_yaml
 from tpvp.experiments.greenhouse import execute
 from tpvp.io import atomic_write_text
 from tpvp.io.plan import plan_table, write_plan
-from tpvp.path.local import local_path_points
 from tpvp.provenance import provenance
 from tpvp.sensor.camera import look_at_rotations, rotation_to_quaternion
-from tpvp.visibility import covered_voxels
 from tpvp.viz import plot_coverage, plot_plan, write_recording
+from tpvp.viz.geometry import plan_geometry
+from tpvp.viz.interactive import scene_3d
+from tpvp.viz.rows import plot_row_paths
 
 
 def plan_frames(scene, order, roles) -> tuple[dict, dict, dict]:
@@ -47,27 +48,9 @@ def plan_frames(scene, order, roles) -> tuple[dict, dict, dict]:
     return tables, frames, extra
 
 
-def plan_geometry(scene, result) -> dict:
-    """What the pictures of a plant plan draw: the executed views' positions in order, the path
-    around the obstacle sphere, and per ground-truth voxel whether the plan covered it and whether
-    any view could (the oracle set)."""
-    order = result.order
-    positions = scene.view_space.positions[order]
-    centre, radius = result.obstacle
-    polyline = np.concatenate([local_path_points(a, b, centre, radius) for a, b in zip(positions[:-1], positions[1:])]) \
-        if len(positions) > 1 else positions
-    covered = np.zeros(scene.grid.size, bool)
-    covered[covered_voxels(scene.truth_visibility, order)] = True
-    observable = np.zeros(scene.grid.size, bool)
-    observable[scene.oracle] = True
-    return {"positions": positions, "polyline": polyline, "covered": covered, "observable": observable}
-
-
 def plan_3d(scene, result, title: str = ""):
     """An interactive (plotly) view of a plant plan: covered plant voxels (blue), observable but
     missed ones (red), the candidate views, the executed and planned views and the path."""
-    from tpvp.viz.interactive import scene_3d  # plotly: loaded only for a notebook's 3D view
-
     geometry = plan_geometry(scene, result)
     plant = scene.grid.countable
     centres = scene.grid.centres
@@ -132,8 +115,6 @@ def write_row_case_outputs(folder, scene, result, config, name: str = "row case"
     """What one greenhouse-row run leaves: results (JSON + CSV), the plan (passive sweep then the
     planned views, world frame), ``config.yaml`` + ``provenance.json``, the path from the top and
     the side, and a rerun ``.rrd``."""
-    from tpvp.viz.rows import plot_row_paths
-
     folder = Path(folder)
     room = scene.room
     positions = np.concatenate([room.initial_positions, result.positions])
@@ -174,8 +155,6 @@ def row_plan_3d(scene, result, title: str = ""):
     """An interactive (plotly) view of a row plan: the oracle voxels the passive sweep and the
     planned views covered (blue) and those they missed (red), the passive views (black), the
     planned views in execution order with their look-at rays, and the band path."""
-    from tpvp.viz.interactive import scene_3d  # plotly: loaded only for a notebook's 3D view
-
     covered = np.union1d(execute(scene, result.positions, result.look_ats), scene.passive_seen)
     missed = np.setdiff1d(scene.oracle, covered)
     centres, room = scene.grid.centres, scene.room

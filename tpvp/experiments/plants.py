@@ -21,12 +21,27 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from scipy import sparse
 
 from tpvp import __version__
-from tpvp.config import PlantConfig, make_config, to_dict
+from tpvp.config import PlantConfig, config_yaml, make_config, to_dict, with_overrides
 from tpvp.errors import ConfigError, InputFileError
-from tpvp.experiments.runner import all_cached, cached_table, code_fingerprint, run_cases  # noqa: F401 (code_fingerprint re-exported)
+from tpvp.experiments.baselines import nbv_curve, optimum
+from tpvp.experiments.comparison import write_comparison_files
+from tpvp.experiments.runner import RESULTS_VERSION, all_cached, cached_table, run_cases
+from tpvp.experiments.single_plant import added_coverage, build_scene, rank_of, run_case, transfer
+from tpvp.io import atomic_write_text, read_point_cloud
+from tpvp.io.publish import staged_folder
+from tpvp.learning.dataset import VIEWS
+from tpvp.learning.methods import learned_one_shot
+from tpvp.metrics import chamfer_distance
+from tpvp.provenance import provenance
 from tpvp.registry import Registry
+from tpvp.scene.samples import load_sample
+from tpvp.setcover.partial import partial_set_cover
+from tpvp.synthetic.plants import generate_session_pair
+from tpvp.visibility import covered_voxels
+from tpvp.viz.experiments import plot_coverage_effort, plot_species_bars
 
 SPECIES = ("tomato", "maize")
 GENERATED_SEEDS = (0, 1, 2)
@@ -58,15 +73,10 @@ class Instance:
 @lru_cache(maxsize=4)
 def _load_instance(instance: Instance):
     if instance.source == "generated":
-        from tpvp.synthetic.plants import generate_session_pair
-
         pair = generate_session_pair(instance.species, instance.seed, days=2.0)
         return pair.previous.points, pair.current.points
     if instance.source == "bundled":
-        from tpvp.scene.samples import load_sample
-
         return load_sample("tomato_0305"), load_sample("tomato_0306")
-    from tpvp.io import read_point_cloud
 
     return (read_point_cloud(instance.previous_file, units="m"), read_point_cloud(instance.current_file, units="m"))
 
@@ -79,18 +89,12 @@ class Case:
     initial_view: int
 
     def config(self, base: PlantConfig) -> PlantConfig:
-        return make_config("plant", to_flat(base) | {"view_space": self.view_space, "initial_view": self.initial_view,
-                                                     "scene.rotation_deg": float(self.rotation_deg)})
+        return with_overrides(base, {"view_space": self.view_space, "initial_view": self.initial_view,
+                                     "scene.rotation_deg": float(self.rotation_deg)})
 
     def labels(self) -> dict:
         return {"instance": self.instance.name, "species": self.instance.species, "source": self.instance.source,
                 "view_space": self.view_space, "rotation_deg": self.rotation_deg, "initial_view": self.initial_view}
-
-
-def to_flat(config) -> dict:
-    from tpvp.config import flatten_keys
-
-    return flatten_keys(to_dict(config))
 
 
 # --------------------------------------------------------------------------------------------------
@@ -181,11 +185,6 @@ def case_list(instances, view_spaces=VIEW_SPACES, rotations=ROTATIONS, initial_v
 def _optimum_for_coverage(scene, result, config) -> dict:
     """The fewest views (same initial view, perfect knowledge) that see as many oracle voxels as
     ``result``'s views did: the physical limit for the coverage the method actually reached."""
-    from scipy import sparse
-
-    from tpvp.setcover.partial import partial_set_cover
-    from tpvp.visibility import covered_voxels
-
     oracle = np.asarray(scene.oracle)
     reached = int(np.isin(oracle, covered_voxels(scene.truth_visibility, result.order)).sum())
     best = partial_set_cover(sparse.csr_matrix(scene.truth_visibility)[:, oracle], reached,
@@ -195,16 +194,12 @@ def _optimum_for_coverage(scene, result, config) -> dict:
 
 def warm_up_rank(scene, executed) -> dict:
     """Rank (1 = a best view) of the first warm-up NBV by the coverage it truly adds to the initial view."""
-    from tpvp.experiments.single_plant import added_coverage, rank_of
-
     if len(executed) < 2:
         return {}
     return {"warm_up_rank": rank_of(added_coverage(scene, executed[:1]), executed[:1], executed[1])}
 
 
 def _case_row(result, scene, config) -> dict:
-    from tpvp.metrics import chamfer_distance
-
     return {"views": result.n_views, "coverage": result.coverage, "path_length_m": result.path_length,
             "coverage_after_warm_up": result.coverage_warm_up, **warm_up_rank(scene, result.executed_views),
             **_optimum_for_coverage(scene, result, config),
@@ -222,8 +217,6 @@ _transfers: dict = {"scene": None}  # this process's transfers of the last scene
 def _shared_transfer(scene, config):
     """The warm-up + registration of ``scene`` under ``config``, computed once per process: Ours and
     Ours w/o inflation (and the two initial-view-only variants) differ only after registration."""
-    from tpvp.experiments.single_plant import transfer
-
     if _transfers["scene"] is not scene:
         _transfers.clear()
         _transfers["scene"] = scene
@@ -249,13 +242,11 @@ def method_config(config: PlantConfig, method: str) -> PlantConfig:
     if method not in ONE_SHOT_OVERRIDES:
         raise KeyError(f"unknown one-shot method {method!r}; choose from {', '.join(ONE_SHOT_OVERRIDES)}")
     overrides = ONE_SHOT_OVERRIDES[method]
-    return make_config("plant", to_flat(config) | overrides) if overrides else config
+    return with_overrides(config, overrides)
 
 
 def _one_shot(name: str):
     def method(scene, config):
-        from tpvp.experiments.single_plant import run_case
-
         config = method_config(config, name)
         return [_case_row(run_case(scene, config, transferred=_shared_transfer(scene, config)), scene, config)]
     return method
@@ -275,8 +266,6 @@ PLANT_METHODS.register("one-shot-no-prior", "set cover + TSP on the coarse recon
 
 @PLANT_METHODS.register("gmc", "GMC-style sequential NBV from the initial view; the whole 1..20 curve")
 def gmc(scene, config):
-    from tpvp.experiments.baselines import nbv_curve
-
     curve = nbv_curve(scene, config, max_views=max(GMC_BUDGETS))
     return [{"budget": int(row.views), "views": int(row.views), "coverage": row.coverage,
              "path_length_m": row.path_length, "seconds_planning": float(curve["seconds"][:i + 1].sum())}
@@ -285,8 +274,6 @@ def gmc(scene, config):
 
 @PLANT_METHODS.register("optimum", "the exact optimum with perfect knowledge of today's plant (100 % and 98 %)")
 def exact_optimum(scene, config):
-    from tpvp.experiments.baselines import optimum
-
     table = optimum(scene, config, targets=(1.0, 0.98))
     return [{"target": row.target, "views": int(row.views), "coverage": row.coverage, "path_length_m": row.path_length,
              "optimal": bool(row.optimal), "gap": row.gap, "seconds_planning": row.seconds}
@@ -298,13 +285,11 @@ NOT_APPLICABLE = "not applicable: the learned planners know the 32 hemisphere vi
 
 def _learned(labels: str):
     def method(scene, config):
-        from tpvp.learning.planners import VIEWS, learned_one_shot
-
         if len(scene.view_space) < VIEWS:  # a row that says why, not a failed experiment
             return [{"status": NOT_APPLICABLE}]
 
         # the published system: one PC-NBV view before the network
-        config = make_config("plant", to_flat(config) | {"nbv.method": "pc-nbv", "nbv.warm_up_views": 1})
+        config = with_overrides(config, {"nbv.method": "pc-nbv", "nbv.warm_up_views": 1})
         row = learned_one_shot(scene, config, labels)
         return [{**row, **warm_up_rank(scene, row.pop("executed_views"))}]
     return method
@@ -325,14 +310,12 @@ PLANT_METHODS.register("ours-pc-nbv", "the paper's method with the learned PC-NB
 
 def task_key(case: Case, method: str, config: PlantConfig) -> str:
     payload = {"case": asdict(case), "method": method, "config": to_dict(case.config(config)), "version": __version__,
-               "code": code_fingerprint()}
+               "results": RESULTS_VERSION}
     return hashlib.sha256(json.dumps(payload, sort_keys=True, default=str).encode()).hexdigest()[:20]
 
 
 @lru_cache(maxsize=2)
 def _scene(case_without_view: Case, config: PlantConfig):
-    from tpvp.experiments.single_plant import build_scene
-
     previous, current = case_without_view.instance.load()
     return build_scene(previous, current, config, names=(f"{case_without_view.instance.name} previous",
                                                          f"{case_without_view.instance.name} current"))
@@ -496,12 +479,6 @@ def write_results(folder, raw: pd.DataFrame, config: PlantConfig | None = None, 
     coverage-effort and per-species figures and, for a ``comparison`` case, the GMC / Ours /
     optimum comparison (figure, table, rerun recording), as one published folder (whole or not at
     all)."""
-    from tpvp.config import config_yaml
-    from tpvp.io import atomic_write_text
-    from tpvp.io.publish import staged_folder
-    from tpvp.provenance import provenance
-    from tpvp.viz.experiments import plot_coverage_effort, plot_species_bars
-
     config = config or make_config("plant")
     written = {}
     with staged_folder(folder) as stage:
@@ -520,8 +497,6 @@ def write_results(folder, raw: pd.DataFrame, config: PlantConfig | None = None, 
             plot_species_bars(stage.folder / "figures" / f"views_per_species_{source}.png",
                               ours[ours["source"] == source], "views", f"Ours: views per species ({source} pairs)")
         if comparison is not None:
-            from tpvp.experiments.comparison import write_comparison_files
-
             case_config = comparison.config(config)
             scene = _scene(replace(comparison, initial_view=0), replace(case_config, initial_view=0))
             write_comparison_files(stage.folder / "comparison", scene, case_config,

@@ -20,9 +20,10 @@ from tpvp.errors import ConfigError
 from tpvp.scene.normalise import normalise_plant
 from tpvp.scene.samples import load_sample
 from tpvp.sensor.grid import plant_grid
-from tpvp.sensor.sensor import SensorConfig
+from tpvp.sensor.sensor import SensorConfig, depth_image
 from tpvp.viewspace import load_view_space
 from tpvp.visibility import coverage_ratio, oracle_voxels, visibility_matrix
+from tpvp.viz.figures import plot_depth_images
 
 #: Views shown in the depth figure: the three initial views of the paper (17 near-horizontal,
 #: 8 oblique, 21 near-top), then three more around the plant (see :func:`default_depth_views`).
@@ -125,9 +126,6 @@ def render_depth_images(output, grid, views, indices=None, *, look_at=(0.0, 0.0,
     shared colour bar), white where a pixel sees nothing within range. Indices beyond the view
     space are skipped; none left raises ConfigError. Returns the written paths.
     """
-    from tpvp.sensor.sensor import depth_image
-    from tpvp.viz.figures import plot_depth_images
-
     views = np.asarray(views, dtype=np.float64).reshape(-1, 3)
     if indices is None:
         indices = default_depth_views(views, look_at)

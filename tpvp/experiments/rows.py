@@ -23,7 +23,7 @@ import pandas as pd
 from tpvp import __version__
 from tpvp.config import RowConfig, make_config, to_dict
 from tpvp.errors import ConfigError, InputFileError
-from tpvp.experiments.runner import all_cached, cached_table, code_fingerprint, run_cases
+from tpvp.experiments.runner import RESULTS_VERSION, all_cached, cached_table, run_cases
 from tpvp.registry import Registry
 
 ROOMS = ("room1", "room4")
@@ -279,7 +279,7 @@ ALL_METHODS = ("coarse", "blockwise-nbv", "ours", "prior-obb-random", "prior-pas
 
 def task_key(case: RowCase, method: str, config: RowConfig, settings: RowSettings) -> str:
     payload = {"case": asdict(case), "method": method, "config": to_dict(config), "settings": asdict(settings),
-               "version": __version__, "code": code_fingerprint()}
+               "version": __version__, "results": RESULTS_VERSION}
     return hashlib.sha256(json.dumps(payload, sort_keys=True, default=str).encode()).hexdigest()[:20]
 
 

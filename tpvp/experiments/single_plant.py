@@ -9,56 +9,22 @@ the current session's ground truth. Every stage's method is chosen by name in th
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
+from scipy import sparse
 
 from tpvp.config import PlantConfig
-from tpvp.errors import PointCloudError, checked_cloud
 from tpvp.inflation import inflate
-from tpvp.nbv.methods import NbvContext, make_nbv
-from tpvp.path.local import local_path_lengths, obstacle_radius, predicted_size
-from tpvp.path.tsp import shortest_open_path
+from tpvp.nbv.warm_up import warm_up
+from tpvp.path.local import predicted_size
+from tpvp.path.route import path_through
 from tpvp.registration.methods import register
 from tpvp.scene import voxels
-from tpvp.scene.normalise import check_session_pair, normalise_plant, up_rotation
-from tpvp.sensor.grid import build_grid, plant_grid
+from tpvp.scene.simulator import Scene, build_scene, observation  # noqa: F401 (callers build the case's scene here)
+from tpvp.sensor.grid import build_grid
 from tpvp.setcover.methods import SelectionProblem, select_views
-from tpvp.viewspace import get_view_space
-from tpvp.visibility import coverage_ratio, covered_voxels, oracle_voxels, visibility_matrix
-
-NATIVE_RADIUS = 0.4  # m around the real plant when scale = native and no radius is given
-
-
-@dataclass(frozen=True, eq=False)
-class Scene:
-    """Both sessions in the planning frame, the current ground truth and what each view sees.
-
-    The planning frame is the normalised plant frame (docs/single_plant.md#normalisation);
-    ``plant_from_scan`` (4x4, scale included) maps the scan's metric frame into it. ``view_space``
-    and ``sensor`` are those of the planning frame (scaled when planning at the plant's true size).
-    """
-
-    previous: np.ndarray
-    current: np.ndarray
-    grid: object  # OccupancyGrid of the current ground truth (plant + table)
-    view_space: object  # tpvp.viewspace.ViewSpace
-    sensor: object  # SensorConfig in the planning frame
-    truth_visibility: object  # csr (V, voxels): what each view observes on the ground truth
-    oracle: np.ndarray
-    plant_from_scan: np.ndarray
-    table_points: np.ndarray
-    names: tuple = ("previous-session scan", "current-session scan")
-    reduction: dict | None = None  # points in and used per scan, reduction voxel
-
-    @property
-    def views(self) -> np.ndarray:
-        return self.view_space.positions
-
-    @property
-    def scan_scale(self) -> float:
-        """Planning-frame metres per scan metre."""
-        return float(np.cbrt(np.linalg.det(self.plant_from_scan[:3, :3])))
+from tpvp.visibility import coverage_ratio, covered_voxels, visibility_matrix
 
 
 @dataclass(frozen=True, eq=False)
@@ -114,65 +80,8 @@ class CaseResult:
         }
 
 
-def build_scene(previous_points, current_points, config: PlantConfig = PlantConfig(),
-                names=("previous-session scan", "current-session scan")) -> Scene:
-    """Bring both sessions into the planning frame defined by the current session (the plant stays
-    in place between sessions) and render the ground truth from every candidate view.
-
-    ``names`` (e.g. the files) name the scans in errors. Scans of more than
-    ``scene.reduce_above`` points are reduced to voxel centroids at ``scene.reduce_resolution``;
-    the ground truth is built from every point of the current scan, so it does not change."""
-    up = up_rotation(config.scene.up_axis)
-    current_scan, previous_scan = (checked_cloud(points, name) for points, name in
-                                   ((current_points, names[1]), (previous_points, names[0])))
-    if config.scene.up_axis != "+z":
-        current_scan, previous_scan = current_scan @ up.T, previous_scan @ up.T
-    check_session_pair(previous_scan, current_scan, names)
-    space = get_view_space(config.view_space)
-    current = normalise_plant(current_scan, config.scene.largest_side, config.scene.rotation_deg,
-                              centre=config.scene.centre, table=config.uses_table, name=names[1],
-                              table_size=config.scene.table_size, table_resolution=config.scene.table_resolution)
-    sensor = config.sensor
-    if config.scene.scale == "native":
-        # The plant keeps its size: the view sphere and the sensor range are real metres, so in the
-        # planning frame they scale with the plant like every resolution does.
-        space = space.with_radius((config.scene.radius or NATIVE_RADIUS) * current.scale)
-        sensor = replace(sensor, max_range=sensor.max_range * current.scale)
-    elif config.scene.radius is not None:
-        space = space.with_radius(config.scene.radius)
-    grid = plant_grid(current.points, current.table_points, config.gt_resolution)
-    previous = current.transform(previous_scan)
-    del previous_scan, current_scan
-    reduction = {"resolution_m": config.scene.reduce_resolution, "previous_points": len(previous),
-                 "current_points": len(current.points)}
-    # Centroids lie in their points' voxels, so the reduction keeps the ground-truth voxel sets.
-    previous, current_points = (voxels.voxel_centroids(p, config.scene.reduce_resolution)
-                                if len(p) > config.scene.reduce_above else p
-                                for p in (previous, current.points))
-    reduction.update(previous_points_used=len(previous), current_points_used=len(current_points))
-    for name, points, count in ((names[0], previous, None), (names[1], current_points, int(grid.countable.sum()))):
-        count = len(voxels.voxelise(points, config.gt_resolution)) if count is None else count
-        if count < config.scene.min_plant_voxels:
-            raise PointCloudError(
-                f"{name}: only {count} occupied {1e3 * config.gt_resolution:g} mm voxels once the plant is "
-                f"scaled to a {config.scene.largest_side:g} m largest side ({len(points)} points); a plant scan "
-                f"has at least {config.scene.min_plant_voxels} - is this the right file?")
-    truth = visibility_matrix(grid, space.positions, space.look_ats, sensor)
-    plant_from_scan = current.matrix
-    plant_from_scan[:3, :3] = plant_from_scan[:3, :3] @ up
-    return Scene(previous, current_points, grid, space, sensor, truth, oracle_voxels(truth), plant_from_scan,
-                 current.table_points, names, reduction)
-
-
-def observation(scene: Scene, view: int) -> np.ndarray:
-    """What ``view`` observes of the current plant: the centres of the ground-truth voxels it sees."""
-    return scene.grid.centres[scene.truth_visibility[view].indices]
-
-
 def added_coverage(scene, executed) -> np.ndarray:
     """Per view: the oracle voxels it sees that none of ``executed`` sees (``(V,)`` int)."""
-    from scipy import sparse
-
     truth = sparse.csr_matrix(scene.truth_visibility)
     new = np.zeros(truth.shape[1], dtype=bool)
     new[scene.oracle] = True
@@ -186,19 +95,6 @@ def rank_of(added: np.ndarray, executed, view: int) -> int:
     candidates = np.ones(len(added), dtype=bool)
     candidates[list(executed)] = False
     return 1 + int((added[candidates] > added[view]).sum())
-
-
-def warm_up(scene: Scene, config: PlantConfig):
-    """The initial view and ``config.nbv.warm_up_views`` NBVs executed: the NBV method, holding
-    the executed views and their observations."""
-    space = scene.view_space
-    initial = space.view_index(config.initial_view)
-    nbv = make_nbv(NbvContext(space, np.zeros(3), scene.sensor, config.nbv, prior=scene.previous))
-    nbv.integrate(initial, observation(scene, initial))
-    for _ in range(config.nbv.warm_up_views):
-        choice = nbv.next_view()
-        nbv.integrate(choice.view, observation(scene, choice.view))
-    return nbv
 
 
 @dataclass(frozen=True, eq=False)
@@ -286,22 +182,8 @@ def run_case(scene: Scene, config: PlantConfig = PlantConfig(), progress=None,
         selection=selection, tsp=tsp, timings=timings,
         clouds={"coarse": np.unique(coarse, axis=0), "previous": scene.previous,
                 "warped": alignment.warped, "inflation": inflated.inflation, "planning": inflated.planning},
-        obstacle=(centre, radius), warnings=warnings, planning_target=problem.coverage_target,
+        obstacle=(centre, radius), warnings=warnings, planning_target=problem.planning_target,
     )
-
-
-def path_through(space, executed, selected, coarse, config: PlantConfig):
-    """The executed views' path, then the shortest open path from the last one through ``selected``;
-    the obstacle sphere is sized on the coarse reconstruction. Returns (planned views in order,
-    whole path length, the TSP result, obstacle radius)."""
-    centre = np.zeros(3)
-    radius = obstacle_radius(coarse, centre)
-    stops = [executed[-1], *selected]
-    tsp = shortest_open_path(local_path_lengths(space.positions[stops], centre, radius), start=0, config=config.path)
-    planned = [int(stops[i]) for i in tsp.order[1:]]
-    warm_up_path = float(np.trace(local_path_lengths(space.positions[executed], centre, radius), offset=1)) \
-        if len(executed) > 1 else 0.0
-    return planned, warm_up_path + tsp.length, tsp, radius
 
 
 def _registration_warnings(scene: Scene, alignment, config: PlantConfig) -> list:

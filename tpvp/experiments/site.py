@@ -34,8 +34,16 @@ import tempfile
 import time
 from pathlib import Path
 
-from tpvp.errors import ConfigError
-from tpvp.experiments.notebooks import MANIFEST, ROOT, copy_mathjax, mathjax_folder, notebook_paths
+from tpvp.errors import ConfigError, run_command
+from tpvp.experiments.notebooks import (
+    MANIFEST,
+    ROOT,
+    copy_mathjax,
+    mathjax_folder,
+    notebook_paths,
+    published_results,
+)
+from tpvp.io.publish import staged_folder
 
 DOCS = ROOT / "docs"
 README = ROOT / "README.md"
@@ -302,8 +310,6 @@ def build_site(notebooks_folder, destination, *, docs=DOCS, readme=README, allow
     there (at least one) instead of failing. ``mathjax``: True finds a local copy
     (:func:`tpvp.experiments.notebooks.mathjax_folder`), a folder uses that one, None leaves math as text. Returns a summary:
     seconds, notebooks with their modes, reference pages, mathjax folder, destination."""
-    from tpvp.io.publish import staged_folder
-
     start = time.perf_counter()
     notebooks_folder = Path(notebooks_folder).absolute()
     destination = Path(destination).absolute()
@@ -324,8 +330,6 @@ def build_site(notebooks_folder, destination, *, docs=DOCS, readme=README, allow
 
 
 def main(argv=None) -> int:
-    from tpvp.experiments.notebooks import published_results
-
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--notebooks", default=None,
                         help="the executed notebooks (default: outputs/notebooks, as make notebooks writes)")
@@ -334,7 +338,6 @@ def main(argv=None) -> int:
                         help="build from the executed notebooks that are there instead of failing")
     parser.add_argument("--no-strict", action="store_true", help="let mkdocs warnings (broken links) pass")
     args = parser.parse_args(argv)
-    from tpvp.cli import run_command
 
     args.func = lambda a: build_site(a.notebooks or published_results(), a.output, allow_missing=a.allow_missing,
                                      strict=not a.no_strict) and 0

@@ -23,6 +23,9 @@ from tpvp.errors import ConfigError, checked_cloud
 from tpvp.scene import voxels
 
 # Refuse candidate grids larger than this (a sign of wrong units or a wrong half_size).
+# The planning surface's parts in the order that claims a voxel: the transferred previous session,
+# the coarse reconstruction, the inflation layer.
+SURFACE_LAYERS = ("transferred P~", "coarse Q", "inflation I")
 _MAX_CANDIDATES = 50_000_000
 
 

@@ -20,6 +20,11 @@ from dataclasses import asdict
 from pathlib import Path
 
 from tpvp.errors import TpvpError
+from tpvp.io.atomic import atomic_path
+from tpvp.learning import training
+from tpvp.learning.dataset import DatasetConfig, generate_dataset, load_dataset
+from tpvp.learning.weights import load_weights, save_weights, shipped_path
+from tpvp.viz.learning import plot_training_curves
 
 DEFAULT_DATA = Path.home() / ".cache" / "tpvp" / "learning" / "plants"
 QUICK_DATASET = dict(train_plants=4, validation_plants=2, test_plants=2, rotations=2, held_out_rotations=1)
@@ -55,8 +60,6 @@ def _data_folder(args) -> Path:
 
 
 def generate(args) -> dict:
-    from tpvp.learning.dataset import DatasetConfig, generate_dataset
-
     config = DatasetConfig(seed=args.seed, **(QUICK_DATASET if args.quick else {}))
     manifest = generate_dataset(_data_folder(args), config, workers=args.workers, progress=not args.no_progress)
     print(f"dataset {_data_folder(args)}: {manifest['states']} states {manifest['states_per_split']} "
@@ -66,12 +69,6 @@ def generate(args) -> dict:
 
 def train(args) -> None:
     import pandas as pd
-
-    from tpvp.io.atomic import atomic_path
-    from tpvp.learning import training
-    from tpvp.learning.dataset import load_dataset
-    from tpvp.learning.weights import load_weights, save_weights, shipped_path
-    from tpvp.viz.learning import plot_training_curves
 
     dataset = load_dataset(_data_folder(args))
     args.out.mkdir(parents=True, exist_ok=True)
@@ -108,11 +105,6 @@ def train(args) -> None:
 
 def evaluate(args) -> None:
     import pandas as pd
-
-    from tpvp.io.atomic import atomic_path
-    from tpvp.learning import training
-    from tpvp.learning.dataset import load_dataset
-    from tpvp.learning.weights import load_weights, shipped_path
 
     dataset = load_dataset(_data_folder(args))
     rows = []

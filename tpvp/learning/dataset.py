@@ -27,10 +27,16 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from scipy import sparse
 
+from tpvp.config import make_config
 from tpvp.errors import ConfigError, InputFileError
 from tpvp.io.atomic import atomic_path, atomic_write_text
 from tpvp.learning.grid import CELLS, occupancy_grid
+from tpvp.parallel import run_cases
+from tpvp.scene.simulator import build_scene, observation
+from tpvp.setcover.ilp import SetCoverConfig, solve_set_cover
+from tpvp.synthetic.plants import generate_session_pair
 
 VIEWS = 32
 SPLITS = ("train", "validation", "test")
@@ -147,8 +153,6 @@ def long_tail_states(seen: np.ndarray, n1: int, rng) -> list[list[int]]:
 def cover_label(visible, state) -> tuple[np.ndarray, bool]:
     """An exact minimum set of views (bool per view) that sees every visible voxel not seen by
     ``state``; and whether the solver proved it optimal. ``visible``: sparse (views, visible voxels)."""
-    from tpvp.setcover.ilp import SetCoverConfig, solve_set_cover
-
     result = solve_set_cover(visible, executed=list(state), config=SetCoverConfig(solver="highs", time_limit=10.0))
     label = np.zeros(visible.shape[0], dtype=bool)
     label[np.asarray(result.selected, dtype=int)] = True
@@ -172,9 +176,6 @@ def sample_cloud(points: np.ndarray, count: int, rng) -> np.ndarray:
 def rendered_views(points, rotation_deg: float):
     """The simulator's scene of one plant (hemisphere, paper configuration) rotated about the vertical:
     (view positions, per-view observed plant points, bool (views, visible voxels): what each view sees)."""
-    from tpvp.config import make_config
-    from tpvp.experiments.single_plant import build_scene, observation
-
     config = make_config("plant", {"view_space": "hemisphere", "scene.rotation_deg": float(rotation_deg)})
     # No previous session is involved: the current plant stands in for it.
     scene = build_scene(points, points, config)
@@ -184,8 +185,6 @@ def rendered_views(points, rotation_deg: float):
 
 def state_sample(positions, observations, seen, states, cloud_points: int, rng) -> dict:
     """Inputs and targets of ``states`` (ordered view lists) of one rendered plant."""
-    from scipy import sparse
-
     visible = sparse.csr_matrix(seen)
     n = len(states)
     out = {"grids": np.zeros((n, CELLS, CELLS, CELLS), np.float16), "states": np.zeros((n, VIEWS), bool),
@@ -205,8 +204,6 @@ def state_sample(positions, observations, seen, states, cloud_points: int, rng) 
 
 def plant_samples(plant: tuple, split: str, config: DatasetConfig) -> list[dict]:
     """Every sampled state of one plant over its rotations (a worker task)."""
-    from tpvp.synthetic.plants import generate_session_pair
-
     species, seed, rotations = plant
     points = generate_session_pair(species, seed, days=2.0).current.points
     parts = []
@@ -237,8 +234,6 @@ def _plant_task(job, config):
 def generate_dataset(folder, config: DatasetConfig = DatasetConfig(), workers: int = 2, progress: bool = True) -> dict:
     """Render, sample and label every plant of ``config``; write the dataset to ``folder``.
     Returns the manifest. Deterministic given ``config`` (states, labels, clouds)."""
-    from tpvp.experiments.runner import run_cases
-
     folder = Path(folder)
     t0 = time.perf_counter()
     jobs = [(split, plant) for split in SPLITS for plant in config.plants(split)]

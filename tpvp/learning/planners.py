@@ -18,6 +18,7 @@ import time
 
 import numpy as np
 import torch
+from scipy import sparse
 
 from tpvp.errors import ConfigError
 from tpvp.learning.dataset import VIEWS, sample_cloud  # noqa: F401 (VIEWS re-exported)
@@ -25,6 +26,11 @@ from tpvp.learning.grid import occupancy_grid
 from tpvp.learning.training import THRESHOLD
 from tpvp.learning.weights import cached_model
 from tpvp.nbv.methods import NbvChoice, ObservedViews
+from tpvp.nbv.warm_up import warm_up
+from tpvp.path.route import path_through
+from tpvp.setcover.ilp import SetCoverConfig, solve_set_cover
+from tpvp.setcover.methods import Selection, SelectionProblem
+from tpvp.visibility import coverage_ratio, covered_voxels
 
 
 def learned_views(space) -> int:
@@ -83,8 +89,6 @@ class PcNbv(ObservedViews):
 
 def ma_scvp_selection(problem, config=None, weights=None):
     """View-selection method ``ma-scvp``: the network's set for what the NBV method observed."""
-    from tpvp.setcover.methods import Selection
-
     nbv = problem.nbv
     if nbv is None or not hasattr(nbv, "observations"):
         raise ConfigError("view selection 'ma-scvp' reads what the executed views observed: it needs the NBV "
@@ -104,12 +108,6 @@ def ma_scvp_selection(problem, config=None, weights=None):
 def oracle_selection(scene, executed):
     """The exact minimum set of the 32 learned views that sees every oracle voxel the executed views
     did not (voxels only other views see are dropped): what MA-SCVP is trained to predict."""
-    from scipy import sparse
-
-    from tpvp.setcover.ilp import SetCoverConfig, solve_set_cover
-    from tpvp.setcover.methods import Selection
-    from tpvp.visibility import covered_voxels
-
     t0 = time.perf_counter()
     truth = sparse.csr_matrix(scene.truth_visibility)
     remaining = np.setdiff1d(scene.oracle, covered_voxels(truth, executed))
@@ -122,10 +120,6 @@ def oracle_selection(scene, executed):
 def learned_one_shot(scene, config, labels: str = "network") -> dict:
     """The MA-SCVP system on a simulator scene (``config.nbv`` chooses the warm-up NBV; the paper's
     system uses one ``pc-nbv`` view). Returns one result row."""
-    from tpvp.experiments.single_plant import path_through, warm_up
-    from tpvp.setcover.methods import SelectionProblem
-    from tpvp.visibility import coverage_ratio, covered_voxels
-
     if labels not in ("network", "oracle"):
         raise ConfigError(f"labels must be 'network' or 'oracle', got {labels!r}")
     space = scene.view_space

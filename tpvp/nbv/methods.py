@@ -125,13 +125,6 @@ class GeometricNbv(ObservedViews):
 NBV_METHODS.register("geometric")(GeometricNbv)
 
 
-@NBV_METHODS.register("pc-nbv", "PC-NBV-style learned NBV on the 32 hemisphere views (tpvp.learning)")
-def pc_nbv(context: NbvContext):
-    from tpvp.learning.planners import PcNbv  # torch is imported only when the method is used
-
-    return PcNbv(context)
-
-
 def make_nbv(context: NbvContext):
     """The NBV method named by ``context.config.method``."""
     return NBV_METHODS.get(context.config.method)(context)

@@ -3,7 +3,7 @@ torch and differentiated by autograd (the implementation before the analytic num
 3-6 s per pair). It is the oracle of the tests and of ``benchmarks/registration_bench.py``; the
 library never imports it, so a registration never loads torch.
 
-``optimise_autograd`` plugs into :func:`tpvp.registration.embedded_deformation._register` in place
+``optimise_autograd`` plugs into :func:`tpvp.registration.embedded_deformation.register_embedded_deformation` in place
 of the numba optimiser; both draw the same random subsets and step the same :class:`_Adam`.
 """
 

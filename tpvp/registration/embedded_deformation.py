@@ -679,20 +679,16 @@ def _loss_and_gradient(phi, t, P, Q, nodes, a_idx, a_w, e_idx, e_w, g_ij, sel_p,
 # --------------------------------------------------------------------------------------------------
 
 
-def register_embedded_deformation(P, Q, config: EDConfig | None = None) -> RegistrationResult:
+def register_embedded_deformation(P, Q, config: EDConfig | None = None, optimise=None) -> RegistrationResult:
     """Warp the previous-session cloud P (N, 3) onto the current coarse reconstruction Q (metres).
 
     Both clouds must already share a frame (no rigid pre-alignment is done). Returns the warp of
     the final parameters (the reference returns the one of the start of its last iteration).
+    ``optimise``: the optimiser, by default the analytic-gradient one (numba);
+    :func:`tpvp.registration.autograd_reference.optimise_autograd` is the torch-autograd reference
+    that tests and ``benchmarks/registration_bench.py`` compare it with.
     """
-    return _register(P, Q, config, _optimise)
-
-
-def _register(P, Q, config, optimise) -> RegistrationResult:
-    """:func:`register_embedded_deformation` with the optimiser as an argument: :func:`_optimise`
-    (analytic gradients, numba) or :func:`tpvp.registration.autograd_reference.optimise_autograd`
-    (the torch-autograd reference that tests and ``benchmarks/registration_bench.py`` compare it
-    with)."""
+    optimise = _optimise if optimise is None else optimise
     config = EDConfig() if config is None else config
     if not isinstance(config, EDConfig):
         raise ConfigError(f"config must be an EDConfig, got {type(config).__name__}")

@@ -15,6 +15,7 @@ import numpy as np
 from tpvp.registration.embedded_deformation import register_embedded_deformation
 from tpvp.registration.warp_field import register_warp_field
 from tpvp.registry import Registry
+from tpvp.metrics.geometry import chamfer_distance
 
 REGISTRATION_METHODS = Registry("registration method")
 
@@ -54,8 +55,6 @@ def warp_field(previous, coarse, config) -> Alignment:
 @REGISTRATION_METHODS.register("none")
 def no_registration(previous, coarse, config) -> Alignment:
     """The previous session as it is (an ablation: no alignment)."""
-    from tpvp.metrics.geometry import chamfer_distance
-
     previous = np.asarray(previous, dtype=np.float64)
     chamfer = chamfer_distance(previous, coarse)
     return Alignment(previous, chamfer, chamfer, 0.0)

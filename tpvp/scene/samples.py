@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from tpvp.errors import ConfigError
+from tpvp.io import read_point_cloud
 
 DATA = Path(__file__).resolve().parent.parent / "data" / "pheno4d"
 SAMPLES = {
@@ -25,6 +26,4 @@ def sample_path(name: str) -> Path:
 
 def load_sample(name: str) -> np.ndarray:
     """Points of a bundled scan, converted to metres (scanner frame)."""
-    from tpvp.io import read_point_cloud
-
     return read_point_cloud(sample_path(name), units="mm")

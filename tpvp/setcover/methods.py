@@ -29,8 +29,9 @@ SELECTION_METHODS = Registry("view-selection method")
 class SelectionProblem:
     """visibility: sparse (views, planning voxels). executed: views already taken (never selected;
     what they see needs no cover). view_space: the candidates (positions, look-ats).
-    voxel_centres (n, 3) and voxel_weights (n,) or None: the planning surface. coverage_target: the
-    fraction of the planning surface to see. nbv: the NBV method object that chose the warm-up
+    voxel_centres (n, 3) and voxel_weights (n,) or None: the planning surface. planning_target: the
+    fraction of the planning surface to see (``SelectionConfig.planning_target``, resolved from the
+    coverage target of today's plant). nbv: the NBV method object that chose the warm-up
     views; methods that learn from what was observed read ``nbv.occupancy`` (built on first use)
     and ``nbv.view_state`` (None when not available)."""
 
@@ -38,7 +39,7 @@ class SelectionProblem:
     executed: tuple
     view_space: object
     voxel_centres: np.ndarray
-    coverage_target: float = 1.0
+    planning_target: float = 1.0
     voxel_weights: np.ndarray | None = None
     nbv: object = None
 
@@ -60,11 +61,11 @@ class Selection:
 @SELECTION_METHODS.register("set-cover")
 def set_cover(problem: SelectionProblem, config) -> Selection:
     """The paper's selection: the fewest views that see every coverable planning voxel (exact ILP).
-    With ``coverage_target`` t < 1: the fewest views that see at least ``ceil(t x coverable)``
+    With ``planning_target`` t < 1: the fewest views that see at least ``ceil(t x coverable)``
     planning voxels (or that share of the voxel weights), executed views included (exact partial
     set-cover ILP, :func:`tpvp.setcover.partial.partial_set_cover`)."""
     t0 = time.perf_counter()
-    if problem.coverage_target >= 1.0:
+    if problem.planning_target >= 1.0:
         result = solve_set_cover(problem.visibility, executed=problem.executed, config=config.set_cover)
         return Selection(result.selected, result.optimal, result.status, time.perf_counter() - t0, result)
     matrix = sparse.csr_matrix(problem.visibility)
@@ -72,22 +73,13 @@ def set_cover(problem: SelectionProblem, config) -> Selection:
     coverable = np.zeros(matrix.shape[1], dtype=bool)
     coverable[matrix.indices] = True
     total = float(weights[coverable].sum())
-    required = math.ceil(problem.coverage_target * total - 1e-9) if problem.voxel_weights is None \
-        else problem.coverage_target * total
+    required = math.ceil(problem.planning_target * total - 1e-9) if problem.voxel_weights is None \
+        else problem.planning_target * total
     result = partial_set_cover(matrix, required, executed=problem.executed, config=config.set_cover,
                                weights=problem.voxel_weights)
     status = (f"{result.status}; {100 * result.covered_weight / total:.2f} % of the coverable planning surface"
               if total else result.status)
     return Selection(result.selected, result.optimal, status, time.perf_counter() - t0, result)
-
-
-@SELECTION_METHODS.register("ma-scvp")
-def ma_scvp(problem: SelectionProblem, config) -> Selection:
-    """MA-SCVP-style learned view set from what the executed views observed (tpvp.learning; ignores
-    the planning surface)."""
-    from tpvp.learning.planners import ma_scvp_selection  # torch is imported only when the method is used
-
-    return ma_scvp_selection(problem, config)
 
 
 def select_views(problem: SelectionProblem, config) -> Selection:

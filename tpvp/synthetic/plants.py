@@ -67,6 +67,7 @@ from scipy.special import erf as _erf
 
 from tpvp.errors import ConfigError
 from tpvp.io import atomic_write_text, write_point_cloud
+from tpvp.scene.voxels import voxelise
 
 SPECIES = ("tomato", "maize")
 _SPECIES_CODE = {"tomato": 1, "maize": 2}
@@ -815,8 +816,6 @@ def generate_session_pair(species: str, seed: int, days: float = 2.0, stage: flo
 
 def plant_summary(sample: PlantSample, largest_side: float = 0.24, voxel: float = 0.002) -> dict:
     """Points, occupied voxels and bounding-box extent after scaling to ``largest_side`` (m)."""
-    from tpvp.scene.voxels import voxelise
-
     pts = sample.points
     ext = np.ptp(pts, axis=0)
     scale = largest_side / ext.max()

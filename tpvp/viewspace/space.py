@@ -16,6 +16,8 @@ import numpy as np
 
 from tpvp.errors import ConfigError, InputFileError
 from tpvp.registry import Registry
+from tpvp.scene.boxes import room_config
+from tpvp.viewspace.tammes import generate_view_space
 
 DATA = Path(__file__).resolve().parent.parent / "data" / "view_spaces"
 BUNDLED = {"hemisphere": "view_space_hemisphere32.txt", "sphere": "view_space_sphere63.txt"}
@@ -153,8 +155,6 @@ def sphere() -> ViewSpace:
 
 
 def _room(room: str) -> ViewSpace:
-    from tpvp.scene.boxes import room_config
-
     config = room_config(room)
     # The planner assigns look-at targets per session (docs/greenhouse.md); until then every
     # candidate looks at the plant box centre.
@@ -180,8 +180,6 @@ def get_view_space(spec: str | Path) -> ViewSpace:
         return VIEW_SPACES.get(spec_text)()
     match = re.fullmatch(r"tammes(-hemisphere)?:(\d+)", spec_text)
     if match:
-        from tpvp.viewspace.tammes import generate_view_space
-
         upper = bool(match.group(1))
         positions = generate_view_space(int(match.group(2)), radius=PLANT_RADIUS, hemisphere=upper)
         return ViewSpace(spec_text, positions, np.zeros(3), table=upper)

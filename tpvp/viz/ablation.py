@@ -9,7 +9,9 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+from tpvp.inflation.inflate import SURFACE_LAYERS
 from tpvp.viz.figures import _equal_axes, _save, _subsample, plt
+from tpvp.viz.interactive import scene_3d
 
 #: Colours of the planning surface's layers (the paper's figures: previous red, coarse blue,
 #: inflation green) and of the views / voxels only one plan has.
@@ -170,13 +172,20 @@ def plot_registration(path, scene, settings, title: str = "", vmax_mm: float | N
     return _save(fig, path, vector=True)
 
 
+def paired_cases(raw: pd.DataFrame, method_a: str, method_b: str, value: str) -> pd.DataFrame:
+    """``value`` of two methods side by side per case (columns ``method_a`` and ``method_b``),
+    one row per case both ran."""
+    keys = [k for k in ("source", "instance", "species", "view_space", "rotation_deg", "initial_view") if k in raw]
+    rows = raw[raw["method"].isin([method_a, method_b])]
+    table = rows.pivot_table(index=keys, columns="method", values=value, aggfunc="first").reset_index()
+    return table.dropna(subset=[m for m in (method_a, method_b) if m in table])
+
+
 def plot_paired_cases(path, raw: pd.DataFrame, title: str = ""):
     """Every case of the protocol as one point per panel: coverage and views with inflation vs
     without (Table III) and the Chamfer distance of the transferred model to today's plant after
     the warm-up NBV vs on the initial view only (Table IV); the diagonal marks no change. Colour:
     species (the bundled real pair in purple); marker: view space."""
-    from tpvp.experiments.ablation import paired_cases
-
     panels = (("ours-no-inflation", "ours", "coverage", 100, "coverage (%)", "Table III: coverage"),
               ("ours-no-inflation", "ours", "views", 1, "views", "Table III: views"),
               ("initial-view-only", "ours", "chamfer_truth_mm", 1, "Chamfer P~-truth (mm)",
@@ -225,15 +234,12 @@ def planning_surface_3d(scene, ablation, title: str = ""):
     orange) and the oracle voxels only one plan covers."""
     import plotly.graph_objects as go
 
-    from tpvp.experiments.ablation import ORIGINS
-    from tpvp.viz.interactive import scene_3d
-
     centres, origin = ablation.surface_centres, ablation.surface_origin
     truth = scene.grid.centres
     from matplotlib.colors import to_hex
 
     clouds = {f"{label} ({int((origin == i).sum())} voxels)": (centres[origin == i], to_hex(colour))
-              for i, (label, colour) in enumerate(zip(ORIGINS, ORIGIN_COLOURS))}
+              for i, (label, colour) in enumerate(zip(SURFACE_LAYERS, ORIGIN_COLOURS))}
     clouds |= {"today's plant: covered only with inflation": (truth[ablation.seen_only_with], to_hex(ONLY_WITH)),
                "today's plant: covered only without inflation": (truth[ablation.seen_only_without],
                                                                  to_hex(ONLY_WITHOUT))}
@@ -250,7 +256,7 @@ def planning_surface_3d(scene, ablation, title: str = ""):
                                           name=name, text=[f"view {v}" for v in views],
                                           marker={"size": 8, "color": to_hex(colour), "symbol": symbol,
                                                   "line": {"color": "black", "width": 1}}))
-    sizes = {label: 1.5 if label.startswith(ORIGINS[0]) else 4 for label in clouds}
+    sizes = {label: 1.5 if label.startswith(SURFACE_LAYERS[0]) else 4 for label in clouds}
     for trace in figure.data:  # what inflation adds and what the plans differ in: larger markers
         if trace.name in sizes and sizes[trace.name] > 1.5:
             trace.marker.size = sizes[trace.name]

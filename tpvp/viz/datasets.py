@@ -22,6 +22,7 @@ import numpy as np
 import pandas as pd
 
 from tpvp.viz.figures import _save, _subsample, plt
+from tpvp.errors import TpvpError
 
 __all__ = [
     "CLEANING_STEPS",
@@ -246,8 +247,6 @@ def error_row(situation: str, call, *args, **kwargs) -> dict:
     which the data tools' errors all are); returns ``{"situation", "error", "message"}`` with the
     error's class name and its one-line message ("(no error)" when the call succeeded). Other
     exceptions propagate: they are bugs, not messages for a user."""
-    from tpvp.errors import TpvpError
-
     try:
         call(*args, **kwargs)
     except TpvpError as exc:

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from tpvp.viz.figures import _save, plt
+from tpvp.viz.figures import _equal_axes, _save, _subsample, plt
 
 _STYLE = {"ours": ("tab:red", "o"), "ours-no-inflation": ("tab:orange", "s"), "initial-view-only": ("tab:brown", "v"),
           "initial-view-only-no-inflation": ("tab:pink", "^"), "one-shot-no-prior": ("tab:gray", "D"),
@@ -76,8 +76,6 @@ def plot_method_comparison(path, scene, plans, title: str = ""):
     the same view count). Top: the plant, the candidate views (grey), the executed views numbered in
     execution order and the path. Bottom: the plant's ground-truth voxels seen from below, covered
     (blue) and observable but missed (red, drawn larger and on top)."""
-    from tpvp.viz.figures import _equal_axes, _subsample
-
     space = scene.view_space
     plant = scene.grid.countable
     centres = scene.grid.centres[plant]

@@ -6,7 +6,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from tpvp.metrics.views import first_seen_step, share_seen_by_at_most, views_per_voxel
 from tpvp.viz.figures import _equal_axes, _save, _subsample, plt
+from tpvp.viz.geometry import plan_geometry
 
 _SPECIES_COLOURS = {"tomato": "tab:red", "maize": "tab:olive"}
 
@@ -50,7 +52,6 @@ def plot_plans(path, items, title: str = ""):
     """Ours' plan for each showcase (``items``: :class:`tpvp.experiments.species.Showcase`) side by
     side: the plant, the candidate views (grey), the initial and warm-up views (black triangles),
     the planned views numbered in execution order (red) and the path around the obstacle sphere."""
-    from tpvp.experiments.outputs import plan_geometry
 
     fig = plt.figure(figsize=(5.4 * len(items), 5.6))
     for column, item in enumerate(items):
@@ -88,8 +89,6 @@ def plot_view_gains(path, items, curves, title: str = ""):
     light grey: never seen by the plan). Bottom: the oracle voxels each step sees first (log
     scale), labelled with the view's index."""
     from matplotlib.colors import BoundaryNorm
-
-    from tpvp.experiments.species import first_seen_step
 
     steps = max(len(c) for c in curves)
     cmap = plt.get_cmap("viridis_r", steps)
@@ -175,7 +174,6 @@ def plot_views_per_voxel(path, counts: dict, k_max: int = 8, title: str = ""):
     """How many candidate views see each oracle voxel: ``counts`` ``{(species, view_space):
     views_per_voxel array}``; one panel per view space with, per species, the share of the oracle
     voxels seen by at most k views, k = 1 .. ``k_max`` (grouped bars)."""
-    from tpvp.experiments.species import share_seen_by_at_most
 
     spaces = list(dict.fromkeys(space for _, space in counts))
     species = list(dict.fromkeys(sp for sp, _ in counts))
@@ -208,7 +206,6 @@ def plot_hard_voxels(path, panels, few: int = 2, title: str = ""):
     """Where the hard voxels are (``panels``: a list of ``(title, scene)``): the oracle voxels seen
     by at most ``few`` candidate views (red, large, on top) among the others (light blue), from the
     side (elevation 15 deg) and from below (elevation -40 deg)."""
-    from tpvp.experiments.species import views_per_voxel
 
     fig = plt.figure(figsize=(4.8 * len(panels), 8.6))
     for column, (name, scene) in enumerate(panels):

@@ -1,0 +1,48 @@
+"""The layering rules of docs/architecture.md, read from the code's AST (benchmarks/import_graph.py):
+no import cycle, no stage importing ``learning`` or ``experiments``, few function-local imports of
+tpvp's own modules and each with its reason, no private name imported from another package."""
+
+import importlib.util
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+MAX_LOCAL_IMPORTS = 20
+
+
+@pytest.fixture(scope="module")
+def report():
+    spec = importlib.util.spec_from_file_location("import_graph", ROOT / "benchmarks" / "import_graph.py")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules["import_graph"] = module  # dataclasses look their module up there
+    spec.loader.exec_module(module)
+    return module.analyse()
+
+
+def test_no_import_cycle(report):
+    assert report.cycles == []
+
+
+def test_no_upward_import(report):
+    assert sorted(report.upward) == []
+
+
+def test_function_local_imports_are_few_and_say_why(report):
+    assert len(report.local) <= MAX_LOCAL_IMPORTS, report.local
+    assert [(file, line) for file, line, text in report.local if "#" not in text] == []
+
+
+def test_no_private_name_imported_across_packages(report):
+    assert report.private == []
+
+
+def test_a_stage_registry_finds_the_learned_methods_without_importing_torch():
+    """The learned planners register through the plugin hook; listing them loads no network."""
+    code = ("import sys; from tpvp.nbv.methods import NBV_METHODS; from tpvp.setcover.methods import "
+            "SELECTION_METHODS; print('pc-nbv' in NBV_METHODS, 'ma-scvp' in SELECTION_METHODS.names(), "
+            "'torch' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT)
+    assert out.stdout.split() == ["True", "True", "False"]

@@ -1,0 +1,106 @@
+"""The simulated session pair: both scans in the planning frame, the current session's ground truth
+and what every candidate view observes of it (the simulator the experiments execute plans in).
+
+``config`` is a :class:`tpvp.config.PlantConfig` (the scene, sensor and view-space sections are read).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from tpvp.errors import PointCloudError, checked_cloud
+from tpvp.scene import voxels
+from tpvp.scene.normalise import check_session_pair, normalise_plant, up_rotation
+from tpvp.sensor.grid import plant_grid
+from tpvp.viewspace import get_view_space
+from tpvp.visibility import oracle_voxels, visibility_matrix
+
+NATIVE_RADIUS = 0.4  # m around the real plant when scale = native and no radius is given
+
+
+@dataclass(frozen=True, eq=False)
+class Scene:
+    """Both sessions in the planning frame, the current ground truth and what each view sees.
+
+    The planning frame is the normalised plant frame (docs/single_plant.md#normalisation);
+    ``plant_from_scan`` (4x4, scale included) maps the scan's metric frame into it. ``view_space``
+    and ``sensor`` are those of the planning frame (scaled when planning at the plant's true size).
+    """
+
+    previous: np.ndarray
+    current: np.ndarray
+    grid: object  # OccupancyGrid of the current ground truth (plant + table)
+    view_space: object  # tpvp.viewspace.ViewSpace
+    sensor: object  # SensorConfig in the planning frame
+    truth_visibility: object  # csr (V, voxels): what each view observes on the ground truth
+    oracle: np.ndarray
+    plant_from_scan: np.ndarray
+    table_points: np.ndarray
+    names: tuple = ("previous-session scan", "current-session scan")
+    reduction: dict | None = None  # points in and used per scan, reduction voxel
+
+    @property
+    def views(self) -> np.ndarray:
+        return self.view_space.positions
+
+    @property
+    def scan_scale(self) -> float:
+        """Planning-frame metres per scan metre."""
+        return float(np.cbrt(np.linalg.det(self.plant_from_scan[:3, :3])))
+
+
+def build_scene(previous_points, current_points, config,
+                names=("previous-session scan", "current-session scan")) -> Scene:
+    """Bring both sessions into the planning frame defined by the current session (the plant stays
+    in place between sessions) and render the ground truth from every candidate view.
+
+    ``names`` (e.g. the files) name the scans in errors. Scans of more than
+    ``scene.reduce_above`` points are reduced to voxel centroids at ``scene.reduce_resolution``;
+    the ground truth is built from every point of the current scan, so it does not change."""
+    up = up_rotation(config.scene.up_axis)
+    current_scan, previous_scan = (checked_cloud(points, name) for points, name in
+                                   ((current_points, names[1]), (previous_points, names[0])))
+    if config.scene.up_axis != "+z":
+        current_scan, previous_scan = current_scan @ up.T, previous_scan @ up.T
+    check_session_pair(previous_scan, current_scan, names)
+    space = get_view_space(config.view_space)
+    current = normalise_plant(current_scan, config.scene.largest_side, config.scene.rotation_deg,
+                              centre=config.scene.centre, table=config.uses_table, name=names[1],
+                              table_size=config.scene.table_size, table_resolution=config.scene.table_resolution)
+    sensor = config.sensor
+    if config.scene.scale == "native":
+        # The plant keeps its size: the view sphere and the sensor range are real metres, so in the
+        # planning frame they scale with the plant like every resolution does.
+        space = space.with_radius((config.scene.radius or NATIVE_RADIUS) * current.scale)
+        sensor = replace(sensor, max_range=sensor.max_range * current.scale)
+    elif config.scene.radius is not None:
+        space = space.with_radius(config.scene.radius)
+    grid = plant_grid(current.points, current.table_points, config.gt_resolution)
+    previous = current.transform(previous_scan)
+    del previous_scan, current_scan
+    reduction = {"resolution_m": config.scene.reduce_resolution, "previous_points": len(previous),
+                 "current_points": len(current.points)}
+    # Centroids lie in their points' voxels, so the reduction keeps the ground-truth voxel sets.
+    previous, current_points = (voxels.voxel_centroids(p, config.scene.reduce_resolution)
+                                if len(p) > config.scene.reduce_above else p
+                                for p in (previous, current.points))
+    reduction.update(previous_points_used=len(previous), current_points_used=len(current_points))
+    for name, points, count in ((names[0], previous, None), (names[1], current_points, int(grid.countable.sum()))):
+        count = len(voxels.voxelise(points, config.gt_resolution)) if count is None else count
+        if count < config.scene.min_plant_voxels:
+            raise PointCloudError(
+                f"{name}: only {count} occupied {1e3 * config.gt_resolution:g} mm voxels once the plant is "
+                f"scaled to a {config.scene.largest_side:g} m largest side ({len(points)} points); a plant scan "
+                f"has at least {config.scene.min_plant_voxels} - is this the right file?")
+    truth = visibility_matrix(grid, space.positions, space.look_ats, sensor)
+    plant_from_scan = current.matrix
+    plant_from_scan[:3, :3] = plant_from_scan[:3, :3] @ up
+    return Scene(previous, current_points, grid, space, sensor, truth, oracle_voxels(truth), plant_from_scan,
+                 current.table_points, names, reduction)
+
+
+def observation(scene: Scene, view: int) -> np.ndarray:
+    """What ``view`` observes of the current plant: the centres of the ground-truth voxels it sees."""
+    return scene.grid.centres[scene.truth_visibility[view].indices]

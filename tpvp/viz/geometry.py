@@ -1,0 +1,24 @@
+"""What the pictures of a plan draw, as arrays (no plotting library)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from tpvp.path.local import local_path_points
+from tpvp.visibility import covered_voxels
+
+
+def plan_geometry(scene, result) -> dict:
+    """What the pictures of a plant plan draw: the executed views' positions in order, the path
+    around the obstacle sphere, and per ground-truth voxel whether the plan covered it and whether
+    any view could (the oracle set)."""
+    order = result.order
+    positions = scene.view_space.positions[order]
+    centre, radius = result.obstacle
+    polyline = np.concatenate([local_path_points(a, b, centre, radius) for a, b in zip(positions[:-1], positions[1:])]) \
+        if len(positions) > 1 else positions
+    covered = np.zeros(scene.grid.size, bool)
+    covered[covered_voxels(scene.truth_visibility, order)] = True
+    observable = np.zeros(scene.grid.size, bool)
+    observable[scene.oracle] = True
+    return {"positions": positions, "polyline": polyline, "covered": covered, "observable": observable}
