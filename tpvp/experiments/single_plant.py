@@ -21,8 +21,8 @@ from tpvp.path.local import local_path_lengths, obstacle_radius, predicted_size
 from tpvp.path.tsp import shortest_open_path
 from tpvp.registration.methods import register
 from tpvp.scene import voxels
+from tpvp.scene.grid import build_grid, plant_grid
 from tpvp.scene.normalise import check_session_pair, normalise_plant, up_rotation
-from tpvp.sensor.grid import build_grid, plant_grid
 from tpvp.setcover.methods import SelectionProblem, select_views
 from tpvp.viewspace import get_view_space
 from tpvp.visibility import coverage_ratio, covered_voxels, oracle_voxels, visibility_matrix
