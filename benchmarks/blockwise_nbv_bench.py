@@ -44,7 +44,7 @@ import pandas as pd
 from tpvp.nbv.blockwise import BlockwiseNbvConfig, blockwise_nbv
 from tpvp.scene import voxels
 from tpvp.scene.boxes import room_config
-from tpvp.sensor.grid import build_grid
+from tpvp.scene.grid import build_grid
 from tpvp.sensor.sensor import SensorConfig
 from tpvp.synthetic.greenhouse import generate_row
 from tpvp.visibility.oracle import greenhouse_oracle

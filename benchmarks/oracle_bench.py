@@ -18,8 +18,8 @@ import pandas as pd
 
 from tpvp.scene import voxels
 from tpvp.scene.boxes import room_config
+from tpvp.scene.grid import build_grid
 from tpvp.synthetic.greenhouse import generate_row
-from tpvp.sensor.grid import build_grid
 from tpvp.visibility.oracle import greenhouse_oracle
 
 

@@ -108,9 +108,9 @@ def row_instance(n_voxels: int = 20_000, n_views: int = 800, seed: int = 0) -> s
 def tomato_instance():
     """Visibility of the bundled tomato at 4 mm from the 63-view sphere (voxel-driven sensor)."""
     from tpvp.scene import voxels
+    from tpvp.scene.grid import build_grid
     from tpvp.scene.normalise import normalise_plant
     from tpvp.scene.samples import load_sample
-    from tpvp.sensor.grid import build_grid
     from tpvp.viewspace import INITIAL_VIEW_INDICES, load_view_space
     from tpvp.visibility import visibility_matrix
 

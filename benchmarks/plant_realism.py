@@ -21,10 +21,10 @@ import time
 import numpy as np
 import pandas as pd
 
+from tpvp.scene.grid import plant_grid
 from tpvp.scene.normalise import normalise_plant
 from tpvp.synthetic.plants import generate_plant, generate_session_pair
 from tpvp.scene.samples import load_sample
-from tpvp.sensor.grid import plant_grid
 from tpvp.viewspace import load_view_space
 from tpvp.visibility import oracle_voxels, visibility_matrix
 

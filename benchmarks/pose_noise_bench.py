@@ -39,7 +39,7 @@ from scipy.spatial import cKDTree
 
 from tpvp.experiments.pose_noise import GREENHOUSE_SENSOR, PoseNoiseConfig, passive_map, pose_noise_study, summarise
 from tpvp.scene.boxes import room_config
-from tpvp.sensor.grid import grid_from_points
+from tpvp.scene.grid import grid_from_points
 from tpvp.synthetic.greenhouse import generate_row
 
 

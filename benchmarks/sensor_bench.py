@@ -47,10 +47,10 @@ import pandas as pd
 
 from tpvp.errors import SensorError
 from tpvp.scene import voxels
+from tpvp.scene.grid import build_grid
 from tpvp.scene.normalise import normalise_plant
 from tpvp.scene.samples import load_sample
 from tpvp.sensor.camera import D435, in_frustum, look_at_rotation, pixel_ray_directions
-from tpvp.sensor.grid import build_grid
 from tpvp.sensor.sensor import SensorConfig, observe, observe_many
 from tpvp.viewspace import load_view_space
 from tpvp.visibility import visibility_matrix
@@ -224,7 +224,7 @@ _COLD_SCRIPT = textwrap.dedent("""
     import json, time
     import numpy as np
     t0 = time.perf_counter()
-    from tpvp.sensor.grid import build_grid
+    from tpvp.scene.grid import build_grid
     from tpvp.sensor.sensor import SensorConfig, observe, observe_many
     t_import = time.perf_counter() - t0
     rng = np.random.default_rng(0)

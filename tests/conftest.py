@@ -1,7 +1,7 @@
 import pytest
 
+from tpvp.scene.grid import plant_grid
 from tpvp.scene.normalise import normalise_plant
-from tpvp.sensor.grid import plant_grid
 from tpvp.viewspace import load_view_space
 
 

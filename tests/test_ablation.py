@@ -46,7 +46,7 @@ def test_surface_origins_against_brute_force(seed):
 
 def test_surface_origins_follow_the_planning_grid_order_and_skip_empty_layers():
     from tpvp.scene import voxels
-    from tpvp.sensor.grid import build_grid
+    from tpvp.scene.grid import build_grid
 
     rng = np.random.default_rng(7)
     warped, coarse = rng.uniform(-0.05, 0.05, (300, 3)), rng.uniform(-0.05, 0.05, (100, 3))

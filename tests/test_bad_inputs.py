@@ -838,7 +838,7 @@ def test_permission_denied(tmp_path, monkeypatch, capsys, good_cloud):
     if os.geteuid() != 0:
         path.chmod(0)
     else:  # root reads anything: simulate the refusal of the open call
-        import tpvp.io.pointcloud as pc
+        import tpvp.io.files as pc
 
         real_open = os.open
 

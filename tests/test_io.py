@@ -665,7 +665,7 @@ def test_write_creates_parents_and_is_atomic(tmp_path, cloud, monkeypatch):
         raise RuntimeError("disk full")
 
     # A failure while serialising leaves the old file and no temporary behind.
-    monkeypatch.setattr("tpvp.io.pointcloud._packed", boom)
+    monkeypatch.setattr("tpvp.io.writers._packed", boom)
     with pytest.raises(RuntimeError):
         write_point_cloud(path, pts * 2)
     assert path.read_bytes() == old

@@ -17,9 +17,9 @@ from tpvp.nbv import (
 )
 from tpvp.nbv.occupancy import MODE_GAIN, MODE_VISIBILITY, walk
 from tpvp.scene import voxels
+from tpvp.scene.grid import build_grid
 from tpvp.sensor import bruteforce
 from tpvp.sensor.camera import D435, Intrinsics, look_at_rotation, pixel_ray_directions
-from tpvp.sensor.grid import build_grid
 from tpvp.sensor.raycast import cast_ray, encode_key_jit
 
 

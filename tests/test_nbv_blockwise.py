@@ -22,8 +22,8 @@ from tpvp.nbv.blockwise import (
     round_robin_pairing,
 )
 from tpvp.scene.boxes import OrientedBox, room_config
+from tpvp.scene.grid import grid_from_points
 from tpvp.sensor.camera import D435, look_at_rotation, pixel_ray_directions
-from tpvp.sensor.grid import grid_from_points
 from tpvp.sensor.sensor import SensorConfig
 from tpvp.synthetic.greenhouse import generate_row
 

@@ -155,8 +155,8 @@ def test_dense_closed_connected_surface(species, plants):
 def _visibility(points):
     """Oracle share of the voxels and share of the oracle the best single view sees (hemisphere, table,
     2 mm voxels, largest side 0.24 m: the set-up of benchmarks/plant_realism.py)."""
+    from tpvp.scene.grid import plant_grid
     from tpvp.scene.normalise import normalise_plant
-    from tpvp.sensor.grid import plant_grid
     from tpvp.viewspace import load_view_space
     from tpvp.visibility import oracle_voxels, visibility_matrix
 

@@ -12,8 +12,8 @@ from scipy import stats
 from tpvp.errors import ConfigError
 from tpvp.experiments import pose_noise as pn
 from tpvp.scene.boxes import room_config
+from tpvp.scene.grid import grid_from_points
 from tpvp.sensor.camera import D435, look_at_rotation
-from tpvp.sensor.grid import grid_from_points
 from tpvp.sensor.sensor import SensorConfig, observe_poses, view_poses
 from tpvp.synthetic.greenhouse import generate_row
 

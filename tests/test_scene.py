@@ -5,9 +5,9 @@ import pytest
 
 from tpvp.errors import ConfigError, InputFileError, PointCloudError
 from tpvp.scene import voxels
+from tpvp.scene.grid import build_grid
 from tpvp.scene.normalise import normalise_plant, rotate_z, table_slab
 from tpvp.scene.samples import load_sample
-from tpvp.sensor.grid import build_grid
 from tpvp.viewspace import INITIAL_VIEW_INDICES, load_view_space
 
 

@@ -5,9 +5,9 @@ import pytest
 
 from tpvp.errors import ConfigError, SensorError
 from tpvp.scene import voxels
+from tpvp.scene.grid import build_grid
 from tpvp.sensor import bruteforce
 from tpvp.sensor.camera import D435, in_frustum, look_at_rotation, rotation_to_quaternion
-from tpvp.sensor.grid import build_grid
 from tpvp.sensor.raycast import cast_ray
 from tpvp.sensor.sensor import SensorConfig, depth_image, observe, observe_many, observe_poses, view_poses
 

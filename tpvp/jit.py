@@ -30,7 +30,7 @@ def compile_kernels(greenhouse: bool = False) -> float:
     """
     from tpvp.nbv import OccupancyMap, information_gain, next_best_view
     from tpvp.path.tsp import TspConfig, shortest_open_path
-    from tpvp.sensor.grid import build_grid
+    from tpvp.scene.grid import build_grid
     from tpvp.sensor.sensor import SensorConfig, depth_image, observe, observe_many
     from tpvp.visibility import visibility_matrix
     from tpvp.visibility.oracle import greenhouse_oracle

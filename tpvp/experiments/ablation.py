@@ -50,7 +50,7 @@ def example_case(species: str = "maize", view_space: str = "sphere"):
 
 def surface_origins(layers, resolution: float) -> tuple[np.ndarray, np.ndarray]:
     """The voxels at ``resolution`` occupied by any cloud of ``layers`` (a sequence of ``(N, 3)``
-    clouds, e.g. ``(P~, Q, I)``) in code order - the order :func:`tpvp.sensor.grid.build_grid`
+    clouds, e.g. ``(P~, Q, I)``) in code order - the order :func:`tpvp.scene.grid.build_grid`
     gives the planning grid - and per voxel the index of the first layer that occupies it.
     Returns ``(keys (M, 3) int64, origin (M,) int64)``."""
     codes = [voxels.encode_keys(voxels.voxelise(layer, resolution)) if len(layer) else np.zeros(0, np.int64)

@@ -26,7 +26,7 @@ from tpvp.path.tsp import band_path
 from tpvp.registration.methods import register
 from tpvp.scene import voxels
 from tpvp.scene.boxes import room_config
-from tpvp.sensor.grid import build_grid
+from tpvp.scene.grid import build_grid
 from tpvp.setcover.methods import SelectionProblem, select_views
 from tpvp.viewspace import ViewSpace
 from tpvp.viewspace.lookat import (CandidateViews, assigned_views, box_targets, passive_targets,

@@ -61,8 +61,8 @@ from scipy.spatial import cKDTree
 
 from tpvp.errors import ConfigError, checked_cloud
 from tpvp.scene import voxels
+from tpvp.scene.grid import OccupancyGrid
 from tpvp.sensor import kernels
-from tpvp.sensor.grid import OccupancyGrid
 from tpvp.sensor.sensor import SensorConfig, check_camera, observe_poses, view_poses
 
 GREENHOUSE_SENSOR = SensorConfig(model="reference", max_range=2.0)

@@ -17,9 +17,9 @@ import numpy as np
 import pandas as pd
 
 from tpvp.errors import ConfigError
+from tpvp.scene.grid import plant_grid
 from tpvp.scene.normalise import normalise_plant
 from tpvp.scene.samples import load_sample
-from tpvp.sensor.grid import plant_grid
 from tpvp.sensor.sensor import SensorConfig, depth_image
 from tpvp.viewspace import load_view_space
 from tpvp.visibility import coverage_ratio, oracle_voxels, visibility_matrix

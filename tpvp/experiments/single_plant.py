@@ -21,8 +21,8 @@ from tpvp.path.local import predicted_size
 from tpvp.path.route import path_through
 from tpvp.registration.methods import register
 from tpvp.scene import voxels
+from tpvp.scene.grid import build_grid
 from tpvp.scene.simulator import Scene, build_scene, observation  # noqa: F401 (callers build the case's scene here)
-from tpvp.sensor.grid import build_grid
 from tpvp.setcover.methods import SelectionProblem, select_views
 from tpvp.visibility import coverage_ratio, covered_voxels, visibility_matrix
 

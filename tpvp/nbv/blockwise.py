@@ -85,8 +85,8 @@ from tqdm.auto import tqdm
 from tpvp.errors import ConfigError
 from tpvp.nbv.occupancy import FREE, MODE_CARVE, MODE_FREESPACE, MODE_GAIN, OCCUPIED, UNKNOWN, pixel_ray, walk
 from tpvp.scene.boxes import OrientedBox, RoomConfig, room_config
+from tpvp.scene.grid import OccupancyGrid
 from tpvp.sensor.camera import look_at_rotation
-from tpvp.sensor.grid import OccupancyGrid
 from tpvp.sensor.sensor import SensorConfig, observe_many
 from tpvp.viewspace import lookat
 

@@ -31,7 +31,7 @@ from scipy import sparse
 from tpvp.errors import ConfigError, PointCloudError, checked_cloud
 from tpvp.nbv.methods import NBV_METHODS, GeometricNbv, NbvChoice, NbvContext
 from tpvp.scene import voxels
-from tpvp.sensor.grid import OccupancyGrid, build_grid
+from tpvp.scene.grid import OccupancyGrid, build_grid
 from tpvp.visibility import visibility_matrix
 
 VOXELS_ACROSS = 100  # prior voxel = largest side of the prior's bounding box / VOXELS_ACROSS

@@ -74,7 +74,7 @@ from scipy.sparse import linalg as splinalg
 from scipy.spatial import cKDTree
 
 from tpvp.errors import ConfigError, PointCloudError, checked_cloud
-from tpvp.io.pointcloud import MM_EXTENT_THRESHOLD
+from tpvp.io.units import MM_EXTENT_THRESHOLD
 from tpvp.metrics.geometry import chamfer_distance
 from tpvp.scene import voxels
 

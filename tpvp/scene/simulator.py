@@ -12,8 +12,8 @@ import numpy as np
 
 from tpvp.errors import PointCloudError, checked_cloud
 from tpvp.scene import voxels
+from tpvp.scene.grid import plant_grid
 from tpvp.scene.normalise import check_session_pair, normalise_plant, up_rotation
-from tpvp.sensor.grid import plant_grid
 from tpvp.viewspace import get_view_space
 from tpvp.visibility import oracle_voxels, visibility_matrix
 

@@ -10,8 +10,8 @@ from __future__ import annotations
 import numpy as np
 
 from tpvp.scene import voxels
+from tpvp.scene.grid import OccupancyGrid
 from tpvp.sensor.camera import D435, Intrinsics, look_at_rotation, pixel_ray_directions
-from tpvp.sensor.grid import OccupancyGrid
 
 
 def _event_times(k, step, res, origin, inverse):

@@ -1,6 +1,6 @@
 """The virtual sensor: which ground-truth voxels a camera view observes.
 
-Two measurement models over one :class:`~tpvp.sensor.grid.OccupancyGrid` (see
+Two measurement models over one :class:`~tpvp.scene.grid.OccupancyGrid` (see
 :mod:`tpvp.sensor.kernels`): ``reference`` (default; the authors' voxel-driven simulator, behind
 every number compared with the paper) and ``pixel`` (one ray per pixel, like a real depth camera).
 """
@@ -13,9 +13,9 @@ import numba
 import numpy as np
 
 from tpvp.errors import ConfigError, SensorError
+from tpvp.scene.grid import OccupancyGrid
 from tpvp.sensor import kernels
 from tpvp.sensor.camera import D435, Intrinsics, look_at_rotation
-from tpvp.sensor.grid import OccupancyGrid
 
 MODELS = ("reference", "pixel")
 

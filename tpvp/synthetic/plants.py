@@ -54,6 +54,9 @@ docs/single_plant.md#normalisation). Samples are stratified (a jittered grid, on
 ``spacing`` of arc length, as many samples across a row as its width needs), so the density is
 uniform per area and a 2 mm voxel grid at the normalised scale sees a closed layer. Deterministic:
 the plant is a function of ``(species, seed, stage, params)``.
+
+The organs' geometry (curves, tubes, blades, the growth curve) is :mod:`tpvp.synthetic.organs`;
+this module holds the species, the sampling and the session pairs.
 """
 
 from __future__ import annotations
@@ -68,13 +71,13 @@ from scipy.special import erf as _erf
 from tpvp.errors import ConfigError
 from tpvp.io import atomic_write_text, write_point_cloud
 from tpvp.scene.voxels import voxelise
+from tpvp.synthetic.organs import (CURVE_NODES, Blade, Curve, Part, Tube, age_visible, beta_profile,
+                                   relative_size, smoothstep)
 
 SPECIES = ("tomato", "maize")
 _SPECIES_CODE = {"tomato": 1, "maize": 2}
 _DEG = np.pi / 180.0
-_CURVE_NODES = 65
 _MAX_LEAVES = 24
-_G_VISIBLE = 0.06  # a leaf is generated once it has reached 6% of its final length
 
 # Default sample spacing: ``_DEFAULT_SPACING`` m for a plant whose skeleton spans ``_NOMINAL_EXTENT``
 # m, proportionally more or less for larger or smaller plants, so that after normalising to a 0.24 m
@@ -204,152 +207,6 @@ class SessionPair:
 
 
 # --------------------------------------------------------------------------------------------------
-# geometry primitives
-# --------------------------------------------------------------------------------------------------
-
-
-def _g(age, T):
-    """Relative size of an organ of age ``age`` days and growth time ``T``: 1 - exp(-(a/T)^2)."""
-    a = np.maximum(np.asarray(age, dtype=np.float64), 0.0)
-    return 1.0 - np.exp(-((a / T) ** 2))
-
-
-def _age_visible(T):
-    """Age at which an organ with growth time T reaches the visibility threshold."""
-    return T * np.sqrt(-np.log(1.0 - _G_VISIBLE))
-
-
-def _smoothstep(a, b, x):
-    u = np.clip((x - a) / (b - a), 0.0, 1.0)
-    return u * u * (3 - 2 * u)
-
-
-def _beta_profile(s, a, b):
-    """s^a (1-s)^b normalised to a maximum of 1 (a blade outline)."""
-    s = np.clip(s, 0.0, 1.0)
-    m = a / (a + b)
-    return (s**a) * ((1 - s) ** b) / ((m**a) * ((1 - m) ** b))
-
-
-class _Curve:
-    """An arc-length parameterised 3D curve with a frame, on normalised parameter s in [0, 1].
-
-    Direction from azimuth ``phi(s)`` and elevation ``theta(s)`` (arrays on the node grid); the
-    lateral vector B is horizontal, N = T x B points 'up' out of the blade, ``psi(s)`` twists B, N
-    about T.
-    """
-
-    def __init__(self, p0, length, phi, theta, psi=None):
-        self.length = float(length)
-        s = np.linspace(0.0, 1.0, _CURVE_NODES)
-        ct, st = np.cos(theta), np.sin(theta)
-        cp, sp = np.cos(phi), np.sin(phi)
-        T = np.stack([ct * cp, ct * sp, st], axis=1)
-        B = np.stack([-sp, cp, np.zeros_like(sp)], axis=1)
-        N = np.stack([-st * cp, -st * sp, ct], axis=1)
-        if psi is not None:
-            c, sn = np.cos(psi)[:, None], np.sin(psi)[:, None]
-            B, N = c * B + sn * N, -sn * B + c * N
-        ds = np.diff(s)[:, None]
-        steps = 0.5 * (T[1:] + T[:-1]) * ds * self.length
-        self.pos = np.asarray(p0, dtype=np.float64)[None, :] + np.vstack([np.zeros((1, 3)), np.cumsum(steps, axis=0)])
-        self.T, self.B, self.N = T, B, N
-
-    def at(self, s):
-        s = np.clip(np.asarray(s, dtype=np.float64), 0.0, 1.0)
-        x = s * (_CURVE_NODES - 1)
-        i = np.minimum(np.floor(x).astype(np.int64), _CURVE_NODES - 2)
-        w = (x - i)[:, None]
-
-        def lerp(a):
-            return a[i] * (1 - w) + a[i + 1] * w
-
-        def unit(v):
-            return v / np.linalg.norm(v, axis=1, keepdims=True)
-
-        return lerp(self.pos), unit(lerp(self.T)), unit(lerp(self.B)), unit(lerp(self.N))
-
-    def point(self, s):
-        p, T, B, N = self.at(np.array([s]))
-        return p[0], T[0], B[0], N[0]
-
-
-class _Tube:
-    """Tube of radius ``radius(s)`` around the sub-range [s0, s1] of a curve (t = angle / 2 pi)."""
-
-    kind = "tube"
-
-    def __init__(self, curve, s0, s1, radius):
-        self.curve, self.s0, self.s1, self._radius = curve, s0, s1, radius
-        self.length = (s1 - s0) * curve.length
-        self.layer = 0.0  # thickness of the scanned layer (m), set by _plant_parts
-
-    def radius(self, f):
-        return self._radius(self.s0 + np.asarray(f) * (self.s1 - self.s0))
-
-    def max_radius(self):
-        return float(np.max(self.radius(np.linspace(0, 1, 9))))
-
-    def eval(self, f, t, w=None):
-        """Surface points at (f, t); ``w`` (layer depth, in layer thicknesses) moves them radially."""
-        p, _, B, N = self.curve.at(self.s0 + f * (self.s1 - self.s0))
-        a = 2 * np.pi * t
-        r = self.radius(f)
-        if w is not None:
-            r = np.maximum(r + w * self.layer, 0.5 * r)
-        return p + r[:, None] * (np.cos(a)[:, None] * B + np.sin(a)[:, None] * N)
-
-
-class _Blade:
-    """Thin sheet around a midrib curve.
-
-    halfwidth(s) = hw * profile(s). Cross-section at s: a curve of arc length |l| = |t| hw(s) whose
-    angle to B starts at ``fold(s)`` (margins raised: a V) and bends by ``roll(s)`` radians per
-    half-width (a cup or a roll), plus a small margin wave along N. ``w`` (layer depth) moves a
-    sample along the cross-section's normal by ``w * layer``.
-    """
-
-    kind = "blade"
-
-    def __init__(self, curve, hw, profile, fold=(0.0, 0.0), roll=lambda s: 0.0 * s, wave=(0.0, 0.0, 0.0)):
-        self.curve, self.hw, self.profile = curve, float(hw), profile
-        self.length = curve.length
-        self.fold, self.roll, self.wave = fold, roll, wave
-        self.layer = 0.0  # thickness of the scanned layer (m), set by _plant_parts
-
-    def halfwidth(self, s):
-        return self.hw * self.profile(np.asarray(s, dtype=np.float64))
-
-    def eval(self, s, t, w=None):
-        p, _, B, N = self.curve.at(s)
-        hw = self.halfwidth(s)
-        u = np.abs(t) * hw
-        f = self.fold[0] + (self.fold[1] - self.fold[0]) * s
-        rho = self.roll(s)  # total bend over the half-width (rad)
-        c = rho / np.maximum(hw, 1e-9)
-        c = np.where(np.abs(c) < 1e-3, 1e-3, c)
-        lat = (np.sin(f + c * u) - np.sin(f)) / c
-        up = (np.cos(f) - np.cos(f + c * u)) / c
-        amp, k, ph = self.wave
-        if amp:
-            up = up + amp * np.abs(t) ** 3 * np.sin(2 * np.pi * k * s + ph)
-        if w is not None:  # the scanned layer: along the normal of the cross-section curve
-            ang = f + c * u
-            off = w * self.layer
-            lat = lat - off * np.sin(ang)
-            up = up + off * np.cos(ang)
-        return p + (np.sign(t) * lat)[:, None] * B + up[:, None] * N
-
-
-@dataclass
-class _Part:
-    key: tuple
-    organ: int
-    kind: str  # "stem", "petiole", "blade"
-    geom: object
-
-
-# --------------------------------------------------------------------------------------------------
 # species
 # --------------------------------------------------------------------------------------------------
 
@@ -457,31 +314,31 @@ def _tomato_spec(seed: int, params: PlantParams) -> _Spec:
     return sp
 
 
-def _tomato_parts(sp: _Spec, age: float, motion: float, size: float) -> list[_Part]:
-    parts: list[_Part] = []
+def _tomato_parts(sp: _Spec, age: float, motion: float, size: float) -> list[Part]:
+    parts: list[Part] = []
     T = sp.leaf_T
     ages = age - sp.leaf_e
-    g = _g(ages, T)
-    n_true = int(np.sum(ages > _age_visible(T)))
+    g = relative_size(ages, T)
+    n_true = int(np.sum(ages > age_visible(T)))
     # ---- stem -------------------------------------------------------------------------------------
-    internodes = [sp.hyp_len * (0.45 + 0.55 * float(_g(age, 5.0)))]
-    internodes += [sp.int_len[i] * float(_g(ages[i] + 1.0, 7.0)) for i in range(n_true)]
+    internodes = [sp.hyp_len * (0.45 + 0.55 * float(relative_size(age, 5.0)))]
+    internodes += [sp.int_len[i] * float(relative_size(ages[i] + 1.0, 7.0)) for i in range(n_true)]
     internodes = np.array(internodes) * size
     total = internodes.sum()
-    sig = np.linspace(0, 1, _CURVE_NODES) * total
+    sig = np.linspace(0, 1, CURVE_NODES) * total
     ref = 0.025 * size
     beta = sp.beta0 + motion * sp.beta_amp * np.sin(2 * np.pi * age / sp.beta_per + sp.beta_ph) \
         + sp.beta1 * sig / ref
     gamma = sp.gamma0 + sp.gamma1 * sig / ref
-    stem = _Curve(np.zeros(3), total, gamma, np.pi / 2 - beta)
-    thick = 0.8 + 0.2 * float(_g(age, 8.0))
+    stem = Curve(np.zeros(3), total, gamma, np.pi / 2 - beta)
+    thick = 0.8 + 0.2 * float(relative_size(age, 8.0))
 
     def stem_r(s, total=total):
         return size * sp.r0 * thick * (1 - 0.3 * np.minimum(np.asarray(s) * total / (0.03 * size), 1.0))
 
     nodes = np.concatenate([[0.0], np.cumsum(internodes)]) / total
     for j in range(len(internodes)):
-        parts.append(_Part((0, j), 0, "stem", _Tube(stem, nodes[j], nodes[j + 1], stem_r)))
+        parts.append(Part((0, j), 0, "stem", Tube(stem, nodes[j], nodes[j + 1], stem_r)))
 
     def base_point(s_node, phi):
         p = stem.point(s_node)[0]
@@ -489,25 +346,25 @@ def _tomato_parts(sp: _Spec, age: float, motion: float, size: float) -> list[_Pa
         return p + 0.8 * r * np.array([np.cos(phi), np.sin(phi), 0.0])
 
     # ---- cotyledons ---------------------------------------------------------------------------------
-    cot_g = 0.35 + 0.65 * float(_g(age, 4.0))
+    cot_g = 0.35 + 0.65 * float(relative_size(age, 4.0))
     amp, per, ph = sp.cot_osc
     for k in range(2):
         L = sp.cot_len[k] * cot_g * size
         th0 = sp.cot_theta[k] + motion * amp[k] * np.sin(2 * np.pi * age / per[k] + ph[k])
-        s = np.linspace(0, 1, _CURVE_NODES)
+        s = np.linspace(0, 1, CURVE_NODES)
         droop = sp.cot_droop[k] * s ** _TOMATO_POSTURE["cot_droop_exp"]
-        curve = _Curve(base_point(nodes[1], sp.cot_phi[k]), L, sp.cot_phi[k] + sp.cot_curl[k] * s,
+        curve = Curve(base_point(nodes[1], sp.cot_phi[k]), L, sp.cot_phi[k] + sp.cot_curl[k] * s,
                        th0 - droop, sp.cot_bank[k] + sp.cot_twist[k] * s)
         pet_hw = 0.0007 / (L * sp.cot_wr[k] / 2)
 
         def cot_profile(s, pet=pet_hw):
             u = np.clip((s - 0.12) / 0.88, 0, 1)
-            blade = _beta_profile(u, 0.75, 0.7)
-            return np.maximum(blade, pet * (1 - _smoothstep(0.1, 0.3, s)))
+            blade = beta_profile(u, 0.75, 0.7)
+            return np.maximum(blade, pet * (1 - smoothstep(0.1, 0.3, s)))
 
         cup = sp.cot_cup[k]
-        parts.append(_Part((1, k), k + 1, "blade",
-                           _Blade(curve, L * sp.cot_wr[k] / 2, cot_profile, roll=lambda s, c=cup: c + 0 * s)))
+        parts.append(Part((1, k), k + 1, "blade",
+                           Blade(curve, L * sp.cot_wr[k] / 2, cot_profile, roll=lambda s, c=cup: c + 0 * s)))
     # ---- compound true leaves -------------------------------------------------------------------------
     amp, per, ph = sp.leaf_osc
     for i in range(n_true):
@@ -516,12 +373,12 @@ def _tomato_parts(sp: _Spec, age: float, motion: float, size: float) -> list[_Pa
         R = sp.rachis[i] * gi * size
         th0 = sp.theta_mature[i] + (sp.theta_young[i] - sp.theta_mature[i]) * np.exp(-a / 4.0) \
             + motion * amp[i] * np.sin(2 * np.pi * age / per[i] + ph[i])
-        s = np.linspace(0, 1, _CURVE_NODES)
-        rachis = _Curve(base_point(nodes[i + 2], sp.leaf_phi[i]), R, sp.leaf_phi[i] + sp.rachis_curl[i] * s,
+        s = np.linspace(0, 1, CURVE_NODES)
+        rachis = Curve(base_point(nodes[i + 2], sp.leaf_phi[i]), R, sp.leaf_phi[i] + sp.rachis_curl[i] * s,
                         th0 - sp.rachis_droop[i] * gi * s**1.5)
         rr = size * sp.rachis_r * (0.5 + 0.5 * gi)
-        parts.append(_Part((2, i, 0), organ, "petiole",
-                           _Tube(rachis, 0.0, 1.0, lambda s, rr=rr: rr * (1 - 0.4 * np.asarray(s)))))
+        parts.append(Part((2, i, 0), organ, "petiole",
+                           Tube(rachis, 0.0, 1.0, lambda s, rr=rr: rr * (1 - 0.4 * np.asarray(s)))))
         npair = int(sp.n_pairs[i])
         pos = [0.6] if npair == 1 else list(0.38 + 0.45 * np.arange(npair) / (npair - 1))
         leaflets = []  # (attach s, side, relative length)
@@ -543,11 +400,11 @@ def _tomato_parts(sp: _Spec, age: float, motion: float, size: float) -> list[_Pa
             d0 = d0 / np.linalg.norm(d0)
             phi0, th0l = np.arctan2(d0[1], d0[0]), np.arcsin(np.clip(d0[2], -1, 1))
             sd = side if side else 1
-            curve = _Curve(p, Ll, phi0 + sd * sp.lf_curl[d] * s, th0l - sp.lf_droop[d] * gi * s**1.4,
+            curve = Curve(p, Ll, phi0 + sd * sp.lf_curl[d] * s, th0l - sp.lf_droop[d] * gi * s**1.4,
                            sd * (sp.lf_twist[d] * s - sp.lf_bank[d]))
             cup = sp.lf_cup[d]
-            parts.append(_Part((2, i, 1 + q), organ, "blade",
-                               _Blade(curve, Ll * sp.lf_wr[d] / 2, lambda s: _beta_profile(s, 0.5, 0.9),
+            parts.append(Part((2, i, 1 + q), organ, "blade",
+                               Blade(curve, Ll * sp.lf_wr[d] / 2, lambda s: beta_profile(s, 0.5, 0.9),
                                       roll=lambda s, c=cup: c + 0 * s)))
     return parts
 
@@ -585,31 +442,31 @@ def _maize_spec(seed: int, params: PlantParams) -> _Spec:
     return sp
 
 
-def _maize_parts(sp: _Spec, age: float, motion: float, size: float) -> list[_Part]:
-    parts: list[_Part] = []
+def _maize_parts(sp: _Spec, age: float, motion: float, size: float) -> list[Part]:
+    parts: list[Part] = []
     ages = age - sp.leaf_e
-    vis = ages > _age_visible(sp.leaf_T)
+    vis = ages > age_visible(sp.leaf_T)
     n = int(np.sum(vis))
-    g = _g(ages, sp.leaf_T)
+    g = relative_size(ages, sp.leaf_T)
     # pseudo-stem: one internode (sheath segment) under each visible collar
     internodes = np.array([sp.sheath[i] * float(g[i]) ** 1.5 for i in range(n)]) * size
     internodes = np.maximum(internodes, 1e-5 * size)
     total = internodes.sum()
-    sig = np.linspace(0, 1, _CURVE_NODES) * total
+    sig = np.linspace(0, 1, CURVE_NODES) * total
     ref = 0.05 * size
     beta = sp.beta0 + motion * sp.beta_amp * np.sin(2 * np.pi * age / sp.beta_per + sp.beta_ph) \
         + sp.beta1 * sig / ref
-    stem = _Curve(np.zeros(3), total, sp.gamma0 + 0 * sig, np.pi / 2 - beta)
-    thick = 0.6 + 0.4 * float(_g(age, 10.0))
+    stem = Curve(np.zeros(3), total, sp.gamma0 + 0 * sig, np.pi / 2 - beta)
+    thick = 0.6 + 0.4 * float(relative_size(age, 10.0))
 
     def stem_r(s, total=total):
         return size * sp.r0 * thick * (1 - 0.3 * np.asarray(s) * min(total / ref, 1.0))
 
     nodes = np.concatenate([[0.0], np.cumsum(internodes)]) / total
     for j in range(n):
-        parts.append(_Part((0, j), 0, "stem", _Tube(stem, nodes[j], nodes[j + 1], stem_r)))
+        parts.append(Part((0, j), 0, "stem", Tube(stem, nodes[j], nodes[j + 1], stem_r)))
     amp, per, ph = sp.leaf_osc
-    s = np.linspace(0, 1, _CURVE_NODES)
+    s = np.linspace(0, 1, CURVE_NODES)
     for i in range(n):
         a, gi = ages[i], float(g[i])
         L = sp.blade_len[i] * gi * size
@@ -622,11 +479,11 @@ def _maize_parts(sp: _Spec, age: float, motion: float, size: float) -> list[_Par
         sn = nodes[i + 1]
         r = float(stem_r(np.array([sn]))[0])
         base = stem.point(sn)[0] + 0.9 * r * np.array([np.cos(phi), np.sin(phi), 0.0])
-        curve = _Curve(base, L, phi + sp.curl[i] * s, theta, sp.twist[i] * s**1.5)
+        curve = Curve(base, L, phi + sp.curl[i] * s, theta, sp.twist[i] * s**1.5)
         tip = sp.tip_exp[i]
 
         def profile(s, tip=tip):
-            return (0.55 + 0.45 * _smoothstep(0.0, 0.3, s)) * np.clip(1 - s**tip, 0, 1) ** 0.6
+            return (0.55 + 0.45 * smoothstep(0.0, 0.3, s)) * np.clip(1 - s**tip, 0, 1) ** 0.6
 
         # a young leaf is rolled (almost a cone); every blade wraps round the stem at its base
         rolled = 2.3 * young
@@ -637,7 +494,7 @@ def _maize_parts(sp: _Spec, age: float, motion: float, size: float) -> list[_Par
 
         fold = (sp.fold[i] * 1.2, sp.fold[i] * 0.4)
         wave = (sp.wave[0][i] * gi * size, sp.wave[1][i], sp.wave[2][i])
-        parts.append(_Part((1, i), i + 1, "blade", _Blade(curve, hw, profile, fold, roll, wave)))
+        parts.append(Part((1, i), i + 1, "blade", Blade(curve, hw, profile, fold, roll, wave)))
     return parts
 
 
@@ -645,7 +502,7 @@ _SPEC = {"tomato": _tomato_spec, "maize": _maize_spec}
 _PARTS = {"tomato": _tomato_parts, "maize": _maize_parts}
 
 
-def _plant_parts(species: str, sp: _Spec, age: float, motion: float, size: float) -> list[_Part]:
+def _plant_parts(species: str, sp: _Spec, age: float, motion: float, size: float) -> list[Part]:
     """The plant's parts at ``age``, every surface carrying the species' scanned layer."""
     parts = _PARTS[species](sp, age, motion, size)
     for p in parts:
@@ -655,7 +512,7 @@ def _plant_parts(species: str, sp: _Spec, age: float, motion: float, size: float
 
 def _first_hidden_leaf(species: str, sp: _Spec, age: float) -> int | None:
     ages = age - sp.leaf_e
-    hidden = np.nonzero(ages <= _age_visible(sp.leaf_T))[0]
+    hidden = np.nonzero(ages <= age_visible(sp.leaf_T))[0]
     return int(hidden[0]) if len(hidden) else None
 
 
@@ -724,7 +581,7 @@ def _setup(species, seed, stage, params):
     return species, seed, stage, params, sp
 
 
-def _spacing(species: str, params: PlantParams, parts: list[_Part]) -> float:
+def _spacing(species: str, params: PlantParams, parts: list[Part]) -> float:
     if params.spacing is not None:
         return float(params.spacing)
     nodes = np.concatenate([p.geom.curve.pos for p in parts])
@@ -773,7 +630,7 @@ def generate_session_pair(species: str, seed: int, days: float = 2.0, stage: flo
         k = _first_hidden_leaf(species, sp, age_prev)
         if k is not None:
             T = np.asarray(sp.leaf_T) * np.ones(len(sp.leaf_e))
-            a_vis = _age_visible(T[k])
+            a_vis = age_visible(T[k])
             latest = age_prev - a_vis + 0.1 * (age_cur - age_prev)  # emerges just after the previous one
             shift = sp.leaf_e[k] - latest
             if shift > 0:

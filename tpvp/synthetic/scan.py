@@ -25,7 +25,7 @@ def handheld_scan(points, room, resolution: float = 0.02, offset: float = 0.3, m
     """Boolean mask of the ``points`` (a row in ``room``'s frame) whose ``resolution`` voxel the
     aisle sweep observes (see the module doc)."""
     from tpvp.experiments.greenhouse import safe_visibility
-    from tpvp.sensor.grid import build_grid
+    from tpvp.scene.grid import build_grid
     from tpvp.sensor.sensor import SensorConfig
     from tpvp.visibility import covered_voxels
 

@@ -6,7 +6,7 @@ import numpy as np
 from scipy import sparse
 from tqdm.auto import tqdm
 
-from tpvp.sensor.grid import OccupancyGrid
+from tpvp.scene.grid import OccupancyGrid
 from tpvp.sensor.sensor import SensorConfig, observe_poses, view_poses
 
 

@@ -17,7 +17,7 @@ from numba import njit, prange
 from tqdm.auto import tqdm
 
 from tpvp.errors import ConfigError
-from tpvp.sensor.grid import OccupancyGrid
+from tpvp.scene.grid import OccupancyGrid
 from tpvp.sensor.raycast import cast_ray
 
 

@@ -1,0 +1,136 @@
+"""Point clouds written atomically: PLY and PCD (binary or ascii) and text tables."""
+
+from __future__ import annotations
+
+import io
+import os
+from pathlib import Path
+
+import numpy as np
+
+from tpvp.errors import ConfigError, PointCloudError
+from tpvp.io.atomic import atomic_write_bytes
+from tpvp.io.text import TEXT_EXTENSIONS
+from tpvp.io.units import as_points
+
+WRITE_EXTENSIONS = (".ply", ".pcd") + TEXT_EXTENSIONS
+
+
+def write_point_cloud(path, points, labels=None, binary: bool = True, *, dtype=None) -> Path:
+    """Write points (and optional integer labels) atomically; returns the path.
+
+    By extension: .ply (binary little-endian, or ascii with ``binary=False``), .pcd (binary or
+    ascii), .xyz/.txt/.pts/.csv text (``x y z [label]``; .csv comma-separated; .pts starts with
+    the point count). ``dtype`` is "float64" or "float32"; the default (None) is float64
+    (lossless) except for PCD, which gets float32 because PCL tools expect it and open3d 0.20
+    reads binary ``F 8`` fields as zeros. Parent directories are created.
+    """
+    if not isinstance(path, (str, os.PathLike)):
+        raise ConfigError(f"path must be a file path, got {type(path).__name__}")
+    path = Path(path)
+    ext = path.suffix.lower()
+    if ext not in WRITE_EXTENSIONS:
+        raise ConfigError(f"{path}: cannot write extension {ext or '(none)'!r} "
+                          f"(supported: {' '.join(WRITE_EXTENSIONS)})")
+    if dtype is None:
+        dtype = "float32" if ext == ".pcd" else "float64"
+    try:
+        dt = np.dtype(dtype)
+    except TypeError:
+        dt = None
+    if dt not in (np.dtype("f4"), np.dtype("f8")):
+        raise ConfigError(f"dtype must be float32 or float64, got {dtype!r}")
+    pts = as_points(points)
+    if len(pts) == 0:
+        raise PointCloudError(f"cannot write {path}: points is empty")
+    if not np.isfinite(pts).all():
+        nbad = int((~np.isfinite(pts).all(axis=1)).sum())
+        raise PointCloudError(f"cannot write {path}: {nbad} points have NaN/inf coordinates")
+    if labels is not None:
+        lab = np.asarray(labels)
+        if lab.shape != (len(pts),):
+            raise ConfigError(f"labels must have shape ({len(pts)},), got {lab.shape}")
+        if lab.dtype.kind not in "iu" and not (
+                lab.dtype.kind in "fb" and np.isfinite(lab).all()
+                and np.array_equal(lab, np.round(lab))):
+            raise ConfigError("labels must be integers")
+        lab = lab.astype(np.int64)
+        if lab.size and (lab.min() < np.iinfo(np.int32).min or lab.max() > np.iinfo(np.int32).max):
+            raise ConfigError("labels must fit in 32-bit integers")
+        labels = lab
+    pts = pts.astype(dt)
+    n = len(pts)
+    fmt = "%.9g" if dt == np.float32 else "%.17g"
+
+    if ext == ".ply":
+        ptype = "float" if dt == np.float32 else "double"
+        header = [
+            "ply",
+            f"format {'binary_little_endian' if binary else 'ascii'} 1.0",
+            "comment written by tpvp",
+            f"element vertex {n}",
+            *(f"property {ptype} {c}" for c in "xyz"),
+            *(["property int label"] if labels is not None else []),
+            "end_header",
+        ]
+        head = ("\n".join(header) + "\n").encode("ascii")
+        if binary:
+            body = _packed(pts, labels, "<", "i4")
+        else:
+            body = _text_body(pts, labels, fmt, " ")
+        atomic_write_bytes(path, head + body)
+    elif ext == ".pcd":
+        size = dt.itemsize
+        fields, sizes, types = "x y z", [size] * 3, ["F"] * 3
+        if labels is not None:
+            fields += " label"
+            sizes.append(4)
+            # PCL's label is unsigned; negative labels (e.g. -1 = unlabelled) need a signed type.
+            types.append("U" if labels.min() >= 0 else "I")
+        k = len(sizes)
+        header = [
+            "# .PCD v0.7 - Point Cloud Data file format",
+            "VERSION 0.7",
+            f"FIELDS {fields}",
+            f"SIZE {' '.join(map(str, sizes))}",
+            f"TYPE {' '.join(types)}",
+            f"COUNT {' '.join(['1'] * k)}",
+            f"WIDTH {n}",
+            "HEIGHT 1",
+            "VIEWPOINT 0 0 0 1 0 0 0",
+            f"POINTS {n}",
+            f"DATA {'binary' if binary else 'ascii'}",
+        ]
+        head = ("\n".join(header) + "\n").encode("ascii")
+        if binary:
+            body = _packed(pts, labels, "<", "u4" if types[-1] == "U" else "i4")
+        else:
+            body = _text_body(pts, labels, fmt, " ")
+        atomic_write_bytes(path, head + body)
+    else:
+        delim = "," if ext == ".csv" else " "
+        head = f"{n}\n".encode() if ext == ".pts" else b""
+        atomic_write_bytes(path, head + _text_body(pts, labels, fmt, delim))
+    return path
+
+
+def _packed(pts: np.ndarray, labels, endian: str, label_code: str) -> bytes:
+    fields = [(c, endian + pts.dtype.str[1:]) for c in "xyz"]
+    if labels is not None:
+        fields.append(("label", endian + label_code))
+    rec = np.empty(len(pts), dtype=fields)
+    for j, c in enumerate("xyz"):
+        rec[c] = pts[:, j]
+    if labels is not None:
+        rec["label"] = labels
+    return rec.tobytes()
+
+
+def _text_body(pts: np.ndarray, labels, fmt: str, delim: str) -> bytes:
+    buf = io.StringIO()
+    if labels is None:
+        np.savetxt(buf, pts, fmt=fmt, delimiter=delim)
+    else:
+        table = np.column_stack([pts.astype(np.float64), labels.astype(np.float64)])
+        np.savetxt(buf, table, fmt=[fmt] * 3 + ["%d"], delimiter=delim)
+    return buf.getvalue().encode("ascii")
