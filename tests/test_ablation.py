@@ -107,7 +107,7 @@ def test_sole_cover_of_a_hand_made_plan():
 @pytest.mark.parametrize("method", ablation.ABLATION_METHODS)
 def test_method_config_is_what_the_registry_runs(method, monkeypatch):
     """The registry's method hands run_case the same configuration as method_config."""
-    from tpvp.experiments import plants, single_plant
+    from tpvp.experiments import plants
 
     class Captured(Exception):
         pass
@@ -115,8 +115,8 @@ def test_method_config_is_what_the_registry_runs(method, monkeypatch):
     def capture(scene, config, transferred=None):
         raise Captured(config)
 
-    monkeypatch.setattr(single_plant, "run_case", capture)
-    monkeypatch.setattr(plants, "_shared_transfer", lambda scene, config: None)
+    monkeypatch.setattr(plants, "run_case", capture)
+    monkeypatch.setattr(plants, "shared_transfer", lambda scene, config: None)
     base = make_config("plant", {"view_space": "sphere", "initial_view": 8})
     with pytest.raises(Captured) as caught:
         plants.PLANT_METHODS.get(method)(None, base)

@@ -7,7 +7,7 @@ from tpvp.cli import main
 from tpvp.config import make_config
 from tpvp.errors import ConfigError, InputFileError
 from tpvp import parallel
-from tpvp.experiments import plants
+from tpvp.experiments import plants, runner
 
 CONFIG = make_config("plant", {"registration.embedded_deformation.iterations": 20})
 
@@ -107,15 +107,14 @@ def test_methods_sharing_a_registration_give_the_rows_of_separate_runs(raw, tiny
     timings = [c for c in table.columns if c.startswith("seconds")]
     case = tiny_cases[1]
     for method in ("ours-no-inflation", "initial-view-only-no-inflation"):
-        plants._transfers.clear()
-        plants._transfers["scene"] = None
+        runner.clear_shared()
         alone = plants.run_task(case, method, CONFIG).drop(columns=["seconds_task"])
         shared = table[(table["method"] == method) & (table["initial_view"] == case.initial_view)]
         columns = [c for c in alone.columns if c not in timings]
         pd.testing.assert_frame_equal(alone[columns].reset_index(drop=True),
                                       shared[columns].reset_index(drop=True), check_dtype=False)
     before = plants.task_key(case, "ours", CONFIG)
-    monkeypatch.setattr(plants, "RESULTS_VERSION", plants.RESULTS_VERSION + 1)
+    monkeypatch.setattr(runner, "RESULTS_VERSION", runner.RESULTS_VERSION + 1)
     assert plants.task_key(case, "ours", CONFIG) != before  # a change of results never reuses rows
 
 

@@ -11,11 +11,9 @@ re-renders instantly.
 
 from __future__ import annotations
 
-import hashlib
 import json
 import re
-import time
-from dataclasses import asdict, dataclass, replace
+from dataclasses import dataclass, replace
 from functools import lru_cache
 from pathlib import Path
 
@@ -23,12 +21,12 @@ import numpy as np
 import pandas as pd
 from scipy import sparse
 
-from tpvp import __version__
-from tpvp.config import PlantConfig, config_yaml, make_config, to_dict, with_overrides
+from tpvp.config import PlantConfig, config_yaml, make_config, with_overrides
 from tpvp.errors import ConfigError, InputFileError
 from tpvp.experiments.baselines import nbv_curve, optimum
 from tpvp.experiments.comparison import write_comparison_files
-from tpvp.experiments.runner import RESULTS_VERSION, all_cached, cached_table, run_cases
+from tpvp.experiments import runner
+from tpvp.experiments.runner import Experiment, shared
 from tpvp.experiments.single_plant import added_coverage, build_scene, rank_of, run_case, transfer
 from tpvp.io import atomic_write_text, read_point_cloud
 from tpvp.io.publish import staged_folder
@@ -211,19 +209,11 @@ def _case_row(result, scene, config) -> dict:
             "seconds_total": sum(result.timings[k] for k in ("warm_up", "registration", "planning"))}
 
 
-_transfers: dict = {"scene": None}  # this process's transfers of the last scene, by warm-up/registration settings
-
-
-def _shared_transfer(scene, config):
+def shared_transfer(scene, config):
     """The warm-up + registration of ``scene`` under ``config``, computed once per process: Ours and
     Ours w/o inflation (and the two initial-view-only variants) differ only after registration."""
-    if _transfers["scene"] is not scene:
-        _transfers.clear()
-        _transfers["scene"] = scene
-    key = (config.initial_view, repr(config.nbv), repr(config.registration))
-    if key not in _transfers:
-        _transfers[key] = transfer(scene, config)
-    return _transfers[key]
+    key = ("transfer", config.initial_view, repr(config.nbv), repr(config.registration))
+    return shared(scene, key, lambda: transfer(scene, config))
 
 
 #: Configuration overrides of the one-shot methods: what Tables I, III and IV switch off or on.
@@ -248,7 +238,7 @@ def method_config(config: PlantConfig, method: str) -> PlantConfig:
 def _one_shot(name: str):
     def method(scene, config):
         config = method_config(config, name)
-        return [_case_row(run_case(scene, config, transferred=_shared_transfer(scene, config)), scene, config)]
+        return [_case_row(run_case(scene, config, transferred=shared_transfer(scene, config)), scene, config)]
     return method
 
 
@@ -308,12 +298,6 @@ PLANT_METHODS.register("ours-pc-nbv", "the paper's method with the learned PC-NB
 # --------------------------------------------------------------------------------------------------
 
 
-def task_key(case: Case, method: str, config: PlantConfig) -> str:
-    payload = {"case": asdict(case), "method": method, "config": to_dict(case.config(config)), "version": __version__,
-               "results": RESULTS_VERSION}
-    return hashlib.sha256(json.dumps(payload, sort_keys=True, default=str).encode()).hexdigest()[:20]
-
-
 @lru_cache(maxsize=2)
 def _scene(case_without_view: Case, config: PlantConfig):
     previous, current = case_without_view.instance.load()
@@ -321,58 +305,34 @@ def _scene(case_without_view: Case, config: PlantConfig):
                                                          f"{case_without_view.instance.name} current"))
 
 
+def case_scene(case: Case, case_config: PlantConfig, cache_dir=None):
+    """The scene depends on the pair, view space and rotation only: shared by initial views and methods."""
+    return _scene(replace(case, initial_view=0), replace(case_config, initial_view=0))
+
+
+PLANT_EXPERIMENTS = Experiment("plant experiments", PLANT_METHODS, case_scene,
+                               order=("view_space", "instance", "rotation_deg", "initial_view", "method"))
+
+
+def task_key(case: Case, method: str, config: PlantConfig) -> str:
+    return runner.task_key(case, method, config)
+
+
 def run_task(case: Case, method: str, config: PlantConfig, cache_dir=None) -> pd.DataFrame:
     """The rows of one (case, method), from the cache when present; written to it otherwise."""
-    path = Path(cache_dir) / f"{task_key(case, method, config)}.parquet" if cache_dir else None
-    function = PLANT_METHODS.get(method)
-
-    def compute():
-        case_config = case.config(config)
-        t0 = time.perf_counter()
-        # The scene depends on the pair, view space and rotation only: shared by initial views and methods.
-        scene = _scene(replace(case, initial_view=0), replace(case_config, initial_view=0))
-        rows = function(scene, case_config)
-        seconds = time.perf_counter() - t0
-        return pd.DataFrame([{**case.labels(), "method": method, **row, "seconds_task": seconds} for row in rows])
-
-    return cached_table(path, compute)
-
-
-def run_case_tasks(case: Case, methods, config: PlantConfig, cache_dir=None) -> list:
-    """Every method of one case in this process (so they share its scene and registrations), each
-    method's rows cached on their own."""
-    return [run_task(case, method, config, cache_dir) for method in methods]
+    return runner.run_task(PLANT_EXPERIMENTS, case, method, config, cache_dir)
 
 
 def run_experiments(cases, methods, config: PlantConfig | None = None, cache_dir=None, workers: int = 1,
                     progress: bool = True, scheduler=None) -> pd.DataFrame:
-    """Every (case, method) task, ``workers`` processes in parallel, or on a Dask cluster when
-    ``scheduler`` is given (an address ``tcp://host:8786`` or a ``distributed.Client``; the cache
-    folder must then be one the workers share); the raw table of all rows. A case's methods run
-    together in one process; each (case, method) is cached on its own."""
-    config = config or make_config("plant")
-    methods = list(methods)
-    for method in methods:
-        PLANT_METHODS.get(method)  # an unknown name fails before any work
-    cases = list(cases)
-    if not cases or not methods:
-        raise ConfigError("no task: the case list or the method list is empty")
-    tables = run_cases(run_case_tasks, cases, (methods, config, cache_dir), len(methods), workers=workers,
-                       scheduler=scheduler, progress=progress, desc="plant experiments")
-    raw = pd.concat(tables, ignore_index=True)
-    order = {m: i for i, m in enumerate(methods)}
-    return raw.sort_values(["view_space", "instance", "rotation_deg", "initial_view", "method"],
-                           key=lambda c: c.map(order) if c.name == "method" else c, kind="stable").reset_index(drop=True)
+    """Every (case, method) task (:func:`tpvp.experiments.runner.run_experiments`); the raw table."""
+    return runner.run_experiments(PLANT_EXPERIMENTS, cases, methods, config or make_config("plant"), cache_dir,
+                                  workers, progress, scheduler)
 
 
 def cached_experiments(cases, methods, config: PlantConfig | None = None, cache_dir=None) -> pd.DataFrame | None:
-    """:func:`run_experiments`' table read from the cache when every (case, method) is there,
-    else None (nothing is computed)."""
-    config = config or make_config("plant")
-    cases, methods = list(cases), list(methods)
-    if not all_cached(cache_dir, (task_key(case, method, config) for case in cases for method in methods)):
-        return None
-    return run_experiments(cases, methods, config, cache_dir=cache_dir, progress=False)
+    """:func:`run_experiments`' table from the cache when every (case, method) is there, else None."""
+    return runner.cached_experiments(PLANT_EXPERIMENTS, cases, methods, config or make_config("plant"), cache_dir)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -498,7 +458,7 @@ def write_results(folder, raw: pd.DataFrame, config: PlantConfig | None = None, 
                               ours[ours["source"] == source], "views", f"Ours: views per species ({source} pairs)")
         if comparison is not None:
             case_config = comparison.config(config)
-            scene = _scene(replace(comparison, initial_view=0), replace(case_config, initial_view=0))
+            scene = case_scene(comparison, case_config)
             write_comparison_files(stage.folder / "comparison", scene, case_config,
                                    title=f"{comparison.view_space}, {comparison.instance.name}, rotation "
                                          f"{comparison.rotation_deg:g} deg, initial view {comparison.initial_view}")
