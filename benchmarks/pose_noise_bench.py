@@ -37,9 +37,11 @@ except ImportError:  # not installed: run from a checkout
 import pandas as pd
 from scipy.spatial import cKDTree
 
-from tpvp.experiments.pose_noise import GREENHOUSE_SENSOR, PoseNoiseConfig, passive_map, pose_noise_study, summarise
+from tpvp.config import PoseNoiseConfig
+from tpvp.experiments.pose_noise import passive_map, pose_noise_study, summarise
 from tpvp.scene.boxes import room_config
 from tpvp.scene.grid import grid_from_points
+from tpvp.sensor.sensor import ROW_SENSOR
 from tpvp.synthetic.greenhouse import generate_row
 
 
@@ -81,7 +83,7 @@ def main(argv=None) -> int:
     truth = np.asarray(row.points)
     grid = grid_from_points(truth, 0.01)
     room = room_config("room1")
-    passive = passive_map(grid, room.initial_positions, room.initial_look_ats, GREENHOUSE_SENSOR)
+    passive = passive_map(grid, room.initial_positions, room.initial_look_ats, ROW_SENSOR)
     positions, look_ats = active_views(grid, passive, np.asarray(room.candidate_positions), args.views, args.seed)
     setup = time.perf_counter() - t0
     ranges = np.linalg.norm(look_ats - positions, axis=1)
@@ -97,7 +99,7 @@ def main(argv=None) -> int:
                              icp_voxel=args.icp_voxel,
                              fusion_voxel=args.fusion_voxel)
     t1 = time.perf_counter()
-    df = pose_noise_study(truth, grid, passive, positions, look_ats, config, GREENHOUSE_SENSOR, progress=True)
+    df = pose_noise_study(truth, grid, passive, positions, look_ats, config, ROW_SENSOR, progress=True)
     study = time.perf_counter() - t1
     if args.csv:
         df.to_csv(args.csv, index=False)

@@ -23,7 +23,6 @@ import numpy as np
 
 from tpvp.registration import EDConfig, register_embedded_deformation
 from tpvp.registration.autograd_reference import optimise_autograd
-from tpvp.registration.embedded_deformation import register_embedded_deformation
 from tpvp.scene import voxels
 from tpvp.scene.normalise import normalise_plant
 from tpvp.scene.samples import load_sample

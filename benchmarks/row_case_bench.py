@@ -37,7 +37,7 @@ def main(argv=None) -> None:
     previous, current = RowCase(args.room, args.pair).load()
     figures = {}
     t = time.perf_counter()
-    scene = greenhouse.build_row_scene(previous, current, config, room=args.room, cache_dir=False)
+    scene = greenhouse.build_row_scene(previous, current, config, cache_dir=False)
     figures["scene (oracle included)"] = time.perf_counter() - t
     figures["oracle"] = scene.timings["oracle"]
     transfer = greenhouse.row_transfer(scene, config)

@@ -26,6 +26,8 @@ def test_paper_configuration_holds_the_papers_values():
     assert row.oracle_grid == pytest.approx(0.1) and row.selection.cover_resolution == pytest.approx(0.04)
     assert row.registration.embedded_deformation.node_coverage == 0.15  # not derived
     assert row.targets.count == 100 and row.targets.rounds == 8 and row.nbv.pixel_stride == 20
+    assert row.protocol.cover_resolutions == (0.10, 0.05, 0.04, 0.03) and row.protocol.budgets == (100, 300, 500)
+    assert row.pose_noise.cover_resolution == 0.04 and row.pose_noise.draws == 5 and row.blockwise.pixel_stride == 20
 
 
 @pytest.mark.parametrize("setting", ["plant", "row"])
@@ -58,6 +60,22 @@ def test_yaml_round_trip(tmp_path):
     loaded = load_config(partial)
     assert loaded.selection.set_cover.solver == "highs" and loaded.nbv.warm_up_views == 2
     assert loaded.registration == PlantConfig().registration
+
+
+def test_every_row_setting_is_in_the_row_configuration(tmp_path):
+    """What the row experiments sweep and the pose-noise study are sections of RowConfig: lists in
+    YAML, tuples in the frozen configuration, checked like every other key."""
+    config = make_config("row", {"protocol.cover_resolutions": [0.1, 0.05], "pose_noise.levels": [[0, 0], [0.01, 2]]},
+                         seed=3)
+    assert config.protocol.cover_resolutions == (0.1, 0.05) and config.pose_noise.levels == ((0.0, 0.0), (0.01, 2.0))
+    assert config.pose_noise.seed == 3  # derived from the run's seed
+    path = tmp_path / "row.yaml"
+    path.write_text(config_yaml(config))
+    assert load_config(path) == config
+    with pytest.raises(ConfigError, match="protocol: budgets must be one or more positive integers"):
+        make_config("row", {"protocol.budgets": [100.5]})
+    with pytest.raises(ConfigError, match="'protocol.nbv_budgets': expected a list"):
+        make_config("row", {"protocol.nbv_budgets": 100})
 
 
 @pytest.mark.parametrize("overrides, words", [

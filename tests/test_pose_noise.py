@@ -9,16 +9,17 @@ import pandas as pd
 import pytest
 from scipy import stats
 
+from tpvp.config import PoseNoiseConfig
 from tpvp.errors import ConfigError
 from tpvp.experiments import pose_noise as pn
 from tpvp.scene.boxes import room_config
 from tpvp.scene.grid import grid_from_points
 from tpvp.sensor.camera import D435, look_at_rotation
-from tpvp.sensor.sensor import SensorConfig, observe_poses, view_poses
+from tpvp.sensor.sensor import ROW_RANGE, ROW_SENSOR, SensorConfig, observe_poses, view_poses
 from tpvp.synthetic.greenhouse import generate_row
 
 RES = 0.02  # truth grid of the small row (the paper's rows: 0.01 m)
-PIXEL = SensorConfig(model="pixel", max_range=2.0, pixel_stride=8)
+PIXEL = SensorConfig(model="pixel", max_range=ROW_RANGE, pixel_stride=8)
 # ICP scaled to the 2 cm truth grid (the defaults are for 1 cm)
 SMALL_ICP = dict(icp_voxel=RES, icp_max_correspondence=(0.06, 0.04, 0.02))
 
@@ -50,10 +51,10 @@ def scene():
 
 # ------------------------------------------------------------------------------------- config
 def test_config_defaults_are_the_paper_protocol():
-    c = pn.PoseNoiseConfig()
+    c = PoseNoiseConfig()
     assert c.levels == ((0.0, 0.0), (0.002, 0.5), (0.005, 1.0), (0.01, 2.0))
     assert c.draws == 5 and c.taus == (0.01, 0.02) and c.icp == (False, True)
-    assert c.icp_max_correspondence == (0.05, 0.02, 0.01)
+    assert c.icp_max_correspondence == (0.05, 0.02, 0.01) and c.cover_resolution == 0.04
 
 
 @pytest.mark.parametrize("bad", [dict(levels=((0.01, -1.0),)), dict(levels=()), dict(draws=0), dict(taus=(0.0,)),
@@ -62,7 +63,7 @@ def test_config_defaults_are_the_paper_protocol():
                                  dict(levels=((0.01, 2.0), (0.01, 2.0)))])
 def test_config_rejects_bad_values(bad):
     with pytest.raises(ConfigError):
-        pn.PoseNoiseConfig(**bad)
+        PoseNoiseConfig(**bad)
 
 
 # -------------------------------------------------------------------------------------- noise
@@ -102,7 +103,7 @@ def test_perturbation_statistics():
 
 
 # ---------------------------------------------------------------------------------- rendering
-@pytest.mark.parametrize("sensor", [pn.GREENHOUSE_SENSOR, PIXEL], ids=["reference", "pixel"])
+@pytest.mark.parametrize("sensor", [ROW_SENSOR, PIXEL], ids=["reference", "pixel"])
 def test_view_rendered_at_its_own_pose_lies_on_the_truth(scene, sensor):
     from scipy.spatial import cKDTree
 
@@ -134,7 +135,7 @@ def test_view_rendered_at_its_own_pose_lies_on_the_truth(scene, sensor):
             assert to_voxel.max() >= 0.4 * RES
 
 
-@pytest.mark.parametrize("sensor", [pn.GREENHOUSE_SENSOR, PIXEL], ids=["reference", "pixel"])
+@pytest.mark.parametrize("sensor", [ROW_SENSOR, PIXEL], ids=["reference", "pixel"])
 def test_zero_noise_fusion_is_the_noise_free_fusion_bitwise(scene, sensor):
     grid, p, r, passive = scene["grid"], scene["positions"], scene["rotations"], scene["passive"]
     noise_free = pn.fuse(grid, p, r, p, r, sensor, passive_points=passive)
@@ -178,7 +179,7 @@ def _rigid(angle_deg, axis, translation, centre):
 
 def test_icp_recovers_a_known_small_rigid_offset(scene):
     grid, room, passive = scene["grid"], scene["room"], scene["passive"]
-    config = pn.PoseNoiseConfig(**SMALL_ICP)
+    config = PoseNoiseConfig(**SMALL_ICP)
     target = pn.prepare_icp_target(passive, config)
     for k in (1, 7):  # passive views: full overlap with the map
         pos, rot = view_poses(grid, room.initial_positions[k:k + 1], room.initial_look_ats[k:k + 1])
@@ -202,17 +203,17 @@ def test_icp_recovers_a_known_small_rigid_offset(scene):
 
 
 def test_icp_is_rejected_below_the_fitness_threshold(scene):
-    config = pn.PoseNoiseConfig(**SMALL_ICP)
+    config = PoseNoiseConfig(**SMALL_ICP)
     view = pn.render_views(scene["grid"], scene["positions"][:1], scene["rotations"][:1])[0]
     transform, fitness, accepted = pn.refine_icp(view + [0.0, 0.0, 3.0], scene["passive"], config)
     assert not accepted and fitness == 0.0
     np.testing.assert_array_equal(transform, np.eye(4))
     half_away = np.concatenate([view, view + [0.0, 0.0, 3.0]])  # half the view has no counterpart
-    strict = pn.PoseNoiseConfig(**SMALL_ICP, icp_min_fitness=0.6)
+    strict = PoseNoiseConfig(**SMALL_ICP, icp_min_fitness=0.6)
     transform, fitness, accepted = pn.refine_icp(half_away, scene["passive"], strict)
     assert 0.3 < fitness < 0.6 and not accepted
     np.testing.assert_array_equal(transform, np.eye(4))
-    assert pn.refine_icp(half_away, scene["passive"], pn.PoseNoiseConfig(**SMALL_ICP))[2]  # 0.3 default
+    assert pn.refine_icp(half_away, scene["passive"], PoseNoiseConfig(**SMALL_ICP))[2]  # 0.3 default
 
 
 # ----------------------------------------------------------------------------------- metrics
@@ -238,7 +239,7 @@ def test_metrics_match_brute_force():
 # ------------------------------------------------------------------------------------- study
 @pytest.fixture(scope="module")
 def study(scene):
-    config = pn.PoseNoiseConfig(levels=((0.0, 0.0), (0.002, 0.5), (0.01, 2.0)), draws=2, seed=4, **SMALL_ICP)
+    config = PoseNoiseConfig(levels=((0.0, 0.0), (0.002, 0.5), (0.01, 2.0)), draws=2, seed=4, **SMALL_ICP)
     args = (scene["truth"], scene["grid"], scene["passive"], scene["positions"], scene["look_ats"], config)
     return config, args, pn.pose_noise_study(*args)
 
@@ -269,7 +270,7 @@ def test_study_is_deterministic_given_the_seed(scene, study):
     exact = ~df.icp
     pd.testing.assert_frame_equal(df.loc[exact, cols], again.loc[exact, cols])
     pd.testing.assert_frame_equal(df.loc[~exact, cols], again.loc[~exact, cols], rtol=1e-9)
-    other = pn.pose_noise_study(*args[:-1], pn.PoseNoiseConfig(levels=((0.01, 2.0),), draws=1, seed=5, icp=(False,)))
+    other = pn.pose_noise_study(*args[:-1], PoseNoiseConfig(levels=((0.01, 2.0),), draws=1, seed=5, icp=(False,)))
     first = df[(df.sigma_t_m == 0.01) & (df.draw == 0) & ~df.icp]
     assert other.chamfer_mm.iloc[0] != first.chamfer_mm.iloc[0]
 

@@ -1,10 +1,12 @@
-"""Greenhouse rows end to end: look-at targets and round robin, the cached oracle, one case of
-Ours and its baselines, the row experiment runner, the CLI and its bad inputs."""
+"""Greenhouse rows end to end: look-at targets and round robin, the look-at prior registry, the
+cached oracle, one case of Ours and its baselines, the row experiment runner, the CLI and its bad
+inputs."""
 
 from __future__ import annotations
 
 import itertools
 import json
+from dataclasses import replace
 
 import numpy as np
 import pandas as pd
@@ -13,9 +15,16 @@ import pytest
 from tpvp.cli import main
 from tpvp.errors import ConfigError, InputFileError, PointCloudError
 from tpvp.experiments import greenhouse, rows
+from tpvp.config import make_config
+from tpvp.scene.boxes import ROOMS, candidate_look_ats, room_config
+from tpvp.sensor.sensor import ROW_RANGE
 from tpvp.synthetic.greenhouse import generate_row
+from tpvp.synthetic.scan import handheld_scan
+from tpvp.viewspace import get_view_space
 from tpvp.viewspace.lookat import (farthest_point_sampling, free_space_keys, round_robin_views,
                                    surface_frontiers)
+from tpvp.viewspace.priors import AUTHORS_PRIORS, LOOK_AT_PRIORS
+from tpvp.visibility.oracle_cache import cached_oracle
 
 QUICK = rows.quick_config({"registration.method": "none"})
 
@@ -98,15 +107,15 @@ def scene(tmp_path_factory):
 
 def test_oracle_is_cached_on_disk_by_scene_and_configuration(scene, tmp_path):
     grid, viewpoints = scene.grid, scene.room.view_box.grid(QUICK.oracle_grid)
-    ids, cached = greenhouse.cached_oracle(grid, viewpoints, 2.0, tmp_path)
+    ids, cached = cached_oracle(grid, viewpoints, ROW_RANGE, tmp_path)
     assert not cached and np.array_equal(ids, scene.oracle)
-    again, cached = greenhouse.cached_oracle(grid, viewpoints, 2.0, tmp_path)
+    again, cached = cached_oracle(grid, viewpoints, ROW_RANGE, tmp_path)
     assert cached and np.array_equal(again, ids)
-    other, cached = greenhouse.cached_oracle(grid, viewpoints, 1.5, tmp_path)  # another range: another entry
+    other, cached = cached_oracle(grid, viewpoints, 1.5, tmp_path)  # another range: another entry
     assert not cached and len(other) < len(ids)
     for entry in (tmp_path / "oracle").iterdir():  # a damaged entry is recomputed
         entry.write_bytes(b"not an array")
-    repaired, cached = greenhouse.cached_oracle(grid, viewpoints, 2.0, tmp_path)
+    repaired, cached = cached_oracle(grid, viewpoints, ROW_RANGE, tmp_path)
     assert not cached and np.array_equal(repaired, ids)
 
 
@@ -139,15 +148,18 @@ def test_priors_give_800_candidate_views_each(scene):
         greenhouse.row_candidates(scene, "magic", QUICK)
     with pytest.raises(ConfigError, match="date"):
         greenhouse.row_candidates(scene, "authors-transfer", QUICK)
+    with pytest.raises(ConfigError, match="registered previous session"):
+        greenhouse.row_candidates(scene, "transfer", QUICK)
+
+
+def test_look_at_priors_are_a_registry_of_the_ladder_and_the_authors_files():
+    assert LOOK_AT_PRIORS.names() == sorted(rows.PRIORS + tuple(f"authors-{p}" for p in rows.PRIORS))
+    assert set(AUTHORS_PRIORS) == set(rows.PRIORS)
 
 
 def test_the_authors_look_at_files_as_candidates(scene):
-    from dataclasses import replace
-
-    from tpvp.scene.boxes import candidate_look_ats
-
     dated = replace(scene, date="20250918")
-    for prior, name in greenhouse.AUTHORS_PRIORS.items():
+    for prior, name in AUTHORS_PRIORS.items():
         table = candidate_look_ats("room1", "20250918", name)
         candidates = greenhouse.row_candidates(dated, f"authors-{prior}", QUICK)
         used = np.flatnonzero(np.any(table != 0, axis=1))
@@ -163,6 +175,17 @@ def test_row_outside_its_rooms_boxes_is_one_clear_error():
     points = generate_row("room1", 0, 0, point_spacing=0.02).points
     with pytest.raises(PointCloudError, match="outside its room's boxes"):
         greenhouse.build_row_scene(points, points + [5.0, 0.0, 0.0], QUICK, cache_dir=False)
+    room4 = generate_row("room4", 0, 0, point_spacing=0.02).points  # the scene's room is config.view_space
+    with pytest.raises(PointCloudError, match="room1's plant box"):
+        greenhouse.build_row_scene(room4, room4, QUICK, cache_dir=False)
+
+
+def test_each_room_is_defined_once_and_its_view_space_made_from_it():
+    for room in ROOMS:
+        space, config = get_view_space(room), room_config(room)
+        assert np.array_equal(space.positions, config.candidate_positions) and space.name == room
+        assert np.array_equal(space.passive_views, config.initial_views) and space.passive_cost == config.passive_cost
+        assert space.max_range == ROW_RANGE == make_config("row", view_space=room).sensor.max_range
 
 
 def test_empty_passive_scan_is_one_clear_error():
@@ -186,22 +209,23 @@ def test_dataset_folder_without_sessions_is_one_clear_error(tmp_path, capsys):
 
 
 def test_row_experiments_cache_and_tables(tmp_path):
-    settings = rows.RowSettings(cover_resolutions=(0.10,), budgets=(50,), repetitions=2)
+    config = rows.quick_config({"registration.method": "none", "protocol.cover_resolutions": (0.10,),
+                                "protocol.budgets": (50,), "protocol.repetitions": 2})
     case = rows.RowCase("room1", 0, point_spacing=0.008)
     methods = ["coarse", "ours", "prior-obb-random", "upper-limit"]
-    raw = rows.run_row_experiments([case], methods, QUICK, settings, cache_dir=tmp_path / "cache", progress=False)
+    raw = rows.run_row_experiments([case], methods, config, cache_dir=tmp_path / "cache", progress=False)
     assert sorted(raw["method"].unique()) == sorted(methods)
     assert len(raw[raw["method"] == "prior-obb-random"]) == 2 and len(raw[raw["method"] == "upper-limit"]) == 3
-    again = rows.run_row_experiments([case], methods, QUICK, settings, cache_dir=tmp_path / "cache", progress=False)
+    again = rows.run_row_experiments([case], methods, config, cache_dir=tmp_path / "cache", progress=False)
     pd.testing.assert_frame_equal(raw, again)  # read back from the cache, identical
-    written = rows.write_results(tmp_path / "out", raw, QUICK, settings)
+    written = rows.write_results(tmp_path / "out", raw, config)
     table6 = written["table6_coverage_effort"]
     coarse = table6[table6["method"] == "coarse"].iloc[0]
     assert coarse["views_mean"] == 15 and coarse["paper_coverage"] == pytest.approx(44.48)
     assert (tmp_path / "out" / "figures" / "coverage_path_frontier.png").stat().st_size > 0
     assert set(written["table5_upper_limit"]["prior"]) == {"obb", "passive", "transfer"}
     with pytest.raises(ConfigError, match="unknown row experiment method"):
-        rows.run_row_experiments([case], ["magic"], QUICK, settings)
+        rows.run_row_experiments([case], ["magic"], config)
 
 
 def test_standin_clean_then_tpvp_greenhouse_on_the_dataset(tmp_path, capsys):
@@ -226,10 +250,10 @@ def test_standin_clean_then_tpvp_greenhouse_on_the_dataset(tmp_path, capsys):
 
 
 def test_blockwise_nbv_and_pose_noise_rows(tmp_path):
-    settings = rows.RowSettings(nbv_budgets=(10, 20), pose_noise_draws=1, pose_noise_resolution=0.10,
-                                pose_noise_levels=((0.0, 0.0), (0.01, 2.0)))
+    config = rows.quick_config({"registration.method": "none", "protocol.nbv_budgets": (10, 20)})
+    assert config.pose_noise.draws == 1 and config.pose_noise.cover_resolution == 0.10
     case = rows.RowCase("room1", 0, point_spacing=0.008)
-    raw = rows.run_row_experiments([case], ["blockwise-nbv", "pose-noise"], QUICK, settings, progress=False)
+    raw = rows.run_row_experiments([case], ["blockwise-nbv", "pose-noise"], config, progress=False)
     nbv = raw[raw["method"] == "blockwise-nbv"]
     assert nbv["views"].tolist() == [10, 20]
     assert nbv["coverage"].is_monotonic_increasing and nbv["path_length_m"].is_monotonic_increasing
@@ -243,9 +267,6 @@ def test_blockwise_nbv_and_pose_noise_rows(tmp_path):
 
 
 def test_handheld_scan_keeps_what_the_aisle_sees_and_drops_what_is_hidden():
-    from tpvp.scene.boxes import room_config
-    from tpvp.synthetic.scan import handheld_scan
-
     room = room_config("room1")
     box = room.plant_box
     aisle = np.sign(box.to_local(room.view_box.center[None])[0, 1])  # the side the aisle is on
@@ -275,3 +296,10 @@ def test_experiments_rows_cli_quick(tmp_path, capsys):
     assert raw["room"].tolist() == ["room4"] and raw["views"].tolist() == [15]
     for name in ("table6_coverage_effort.md", "paper_values.csv", "paper_pose_noise.csv", "config.yaml"):
         assert (out / name).stat().st_size > 0
+
+
+def test_config_command_prints_every_row_setting(capsys):
+    assert main(["config", "--config", "paper-row", "--derived"]) == 0
+    printed = capsys.readouterr().out
+    for section in ("protocol:", "pose_noise:", "blockwise:", "pose_noise.seed = seed"):
+        assert section in printed

@@ -7,7 +7,7 @@ from scipy import sparse
 from tpvp.errors import ConfigError
 from tpvp.sensor import bruteforce
 from tpvp.sensor.sensor import SensorConfig, observe
-from tpvp.visibility import coverage_ratio, covered_voxels, oracle_voxels, visibility_matrix
+from tpvp.visibility import coverage_ratio, covered_voxels, oracle_voxels, safe_visibility, visibility_matrix
 from tpvp.visibility.oracle import greenhouse_oracle
 
 from test_sensor import random_cameras, random_scene
@@ -24,6 +24,18 @@ def test_visibility_matrix_rows_are_observations():
             np.testing.assert_array_equal(matrix[v].indices, observe(grid, positions[v], look_ats[v], config))
         # Non-countable voxels never appear.
         assert not matrix[:, ~grid.countable].nnz
+
+
+def test_safe_visibility_gives_a_camera_inside_the_geometry_an_empty_row():
+    grid = random_scene(11)
+    positions, look_ats = random_cameras(12, 6, radius=0.25)
+    inside = grid.centres[np.flatnonzero(grid.countable)[0]]
+    positions = np.insert(positions, 2, inside, axis=0)
+    look_ats = np.insert(look_ats, 2, look_ats[0], axis=0)
+    matrix = safe_visibility(grid, positions, look_ats, SensorConfig())
+    free = np.delete(np.arange(7), 2)
+    assert matrix.shape == (7, grid.size) and matrix.dtype == bool and matrix[2].nnz == 0
+    assert (matrix[free] != visibility_matrix(grid, positions[free], look_ats[free])).nnz == 0
 
 
 def test_oracle_and_coverage_by_hand():

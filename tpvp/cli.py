@@ -19,11 +19,12 @@ from tpvp.experiments.frontier import coverage_frontier, write_frontier_files
 from tpvp.experiments.greenhouse import build_row_scene, run_row_case
 from tpvp.experiments.outputs import write_case_outputs, write_row_case_outputs
 from tpvp.experiments.render_demo import RenderDemoConfig, run_render_demo
-from tpvp.experiments.rows import RowCase, dataset_cases
+from tpvp.experiments.rows import QUICK, RowCase, dataset_cases
 from tpvp.experiments.single_plant import build_scene, run_case, transfer
 from tpvp.io import atomic_write_text, read_point_cloud
 from tpvp.io.publish import staged_folder
 from tpvp.jit import compile_kernels
+from tpvp.scene.boxes import ROOMS
 from tpvp.scene.samples import load_sample
 from tpvp.viewspace import get_view_space, view_space_choices
 
@@ -72,7 +73,8 @@ def _config(args):
     overrides.update(parse_overrides(args.set))
     config = load_config(args.config, overrides)
 
-    get_view_space(config.view_space).view_index(config.initial_view)  # refuse before any work
+    if config.setting == "plant":  # a row has no initial view: its passive sweep starts it
+        get_view_space(config.view_space).view_index(config.initial_view)  # refuse before any work
     return config
 
 
@@ -199,7 +201,7 @@ def _row_config(args):
     if args.coverage_target is not None:
         overrides["selection.coverage_target"] = args.coverage_target
     if args.quick:
-        overrides["gt_resolution"] = 0.02
+        overrides.update(QUICK)
     overrides.update(parse_overrides(args.set))
     config = load_config(args.config, overrides)
     if config.setting != "row":
@@ -235,8 +237,7 @@ def _greenhouse(args) -> int:
 
         bar.set_postfix_str(stages[0])
         previous, current = case.load()
-        scene = build_row_scene(previous, current, config, room=case.room, names=(f"{case.name} (previous)",
-                                                                                   f"{case.name} (current)"),
+        scene = build_row_scene(previous, current, config, names=(f"{case.name} (previous)", f"{case.name} (current)"),
                                 cache_dir=args.cache, date=case.date)
         result = run_row_case(scene, config, progress=step)
         step("outputs")
@@ -265,13 +266,12 @@ def _greenhouse(args) -> int:
 def _experiments_rows(args) -> int:
     config = _row_config(args)
     cases = row_experiments.default_row_cases(args.quick, args.dataset, tuple(args.rooms))
-    settings = row_experiments.quick_settings() if args.quick else row_experiments.RowSettings()
     methods = args.methods or list(row_experiments.ALL_METHODS)
     where = f"the Dask cluster {args.scheduler}" if args.scheduler else f"{args.workers} local worker(s)"
     print(f"{len(cases)} cases x {len(methods)} methods on {where}; cache {args.cache}")
-    raw = row_experiments.run_row_experiments(cases, methods, config, settings, cache_dir=args.cache, workers=args.workers,
-                                   scheduler=args.scheduler)
-    written = row_experiments.write_results(args.output, raw, config, settings)
+    raw = row_experiments.run_row_experiments(cases, methods, config, cache_dir=args.cache, workers=args.workers,
+                                              scheduler=args.scheduler)
+    written = row_experiments.write_results(args.output, raw, config)
 
     print(plant_experiments.markdown(written["table6_coverage_effort"]))
     print(f"wrote {Path(args.output).absolute()}/ (raw_cases.csv, {', '.join(f'{n}.csv/.md' for n in written)}, "
@@ -292,7 +292,8 @@ def _row_options(p, output):
                    help="covering voxel of the set cover (paper: 0.10, 0.05, 0.04, 0.03; default: the "
                         "configuration's, 0.04)")
     p.add_argument("--coverage-target", type=float, default=None, metavar="FRACTION", help=COVERAGE_TARGET_HELP)
-    p.add_argument("--quick", action="store_true", help="coarse ground truth (2 cm) for a fast look")
+    p.add_argument("--quick", action="store_true",
+                   help="coarse ground truth (2 cm), fewer covering voxels, budgets and draws, for a fast look")
 
 
 def _view_space_arg(value: str) -> str:
@@ -389,7 +390,7 @@ def build_parser() -> argparse.ArgumentParser:
     plant.set_defaults(func=_experiments_plants)
     rows = which.add_parser("rows", help="greenhouse rows: Tables V-VI (Ours, random prior ladder, upper limits)")
     _row_options(rows, "outputs/experiments/rows")
-    rows.add_argument("--rooms", nargs="+", default=["room1", "room4"], help="(default: %(default)s)")
+    rows.add_argument("--rooms", nargs="+", default=list(ROOMS), choices=ROOMS, help="(default: %(default)s)")
     rows.add_argument("--methods", nargs="+", default=None,
                       help="methods to run (default: coarse, blockwise-nbv, ours, prior-obb-random, prior-passive-random, "
                            "prior-transfer-random, upper-limit)")
@@ -401,7 +402,7 @@ def build_parser() -> argparse.ArgumentParser:
     rows.set_defaults(func=_experiments_rows)
     green = sub.add_parser("greenhouse", help="plan and execute one greenhouse-row pair (generated by default)")
     _row_options(green, "outputs/greenhouse")
-    green.add_argument("--room", default="room1", choices=["room1", "room4"], help="(default: %(default)s)")
+    green.add_argument("--room", default=ROOMS[0], choices=ROOMS, help="(default: %(default)s)")
     green.add_argument("--pair", type=int, default=0,
                        help="which consecutive pair: sessions K -> K+1 (default: %(default)s)")
     green.add_argument("--seed", type=int, default=0, help="seed of the generated row (default: %(default)s)")

@@ -15,26 +15,32 @@ new methods are added beside it and chosen by name, never swapped into it silent
 from __future__ import annotations
 
 import dataclasses
+import math
 import types
 import typing
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
+
 from tpvp.errors import ConfigError, InputFileError
 from tpvp.inflation import InflationConfig
 from tpvp.nbv import OccupancyMapConfig
+from tpvp.nbv.blockwise import BlockwiseNbvConfig
 from tpvp.nbv.methods import NBV_METHODS
 from tpvp.path.tsp import TspConfig
 from tpvp.registration import EDConfig
 from tpvp.registration.methods import REGISTRATION_METHODS
 from tpvp.registration.warp_field import WarpFieldConfig
-from tpvp.sensor.sensor import SensorConfig
+from tpvp.sensor.sensor import ROW_RANGE, SensorConfig
 from tpvp.setcover import SetCoverConfig
 from tpvp.setcover.methods import SELECTION_METHODS
 from tpvp.viewspace import get_view_space
 
 SCALES = ("normalised", "native")
 UP_AXES = ("+z", "-z", "+y", "-y", "+x", "-x")
+PAPER_NOISE_LEVELS = ((0.0, 0.0), (0.002, 0.5), (0.005, 1.0), (0.01, 2.0))  # Table VII: (sigma_t m, sigma_r deg)
+ICP_METHODS = ("point_to_plane", "point_to_point")
 
 
 @dataclass(frozen=True)
@@ -216,11 +222,104 @@ class RowTargetsConfig:
 
 
 @dataclass(frozen=True)
+class RowProtocolConfig:
+    """What the row experiments sweep (Tables V-VI): Ours' covering voxels (m), the random
+    baselines' budgets and repetitions, Block-wise NBV's budgets (prefixes of one run of the
+    largest)."""
+
+    cover_resolutions: tuple = (0.10, 0.05, 0.04, 0.03)
+    budgets: tuple = (100, 300, 500)
+    repetitions: int = 5
+    nbv_budgets: tuple = (100, 300, 500)
+
+    def __post_init__(self):
+        _integer(self, "repetitions", minimum=1)
+        for name, kind in (("cover_resolutions", float), ("budgets", int), ("nbv_budgets", int)):
+            values = tuple(getattr(self, name))
+            if not values or any(isinstance(v, bool) or not isinstance(v, (int, float)) or not v > 0
+                                 or (kind is int and v != int(v)) for v in values):
+                raise ConfigError(f"{name} must be one or more positive {'integers' if kind is int else 'numbers'}, "
+                                  f"got {getattr(self, name)!r}")
+            object.__setattr__(self, name, tuple(kind(v) for v in values))
+
+
+@dataclass(frozen=True)
+class PoseNoiseConfig:
+    """The pose-noise study of Table VII (docs/greenhouse.md, :mod:`tpvp.experiments.pose_noise`,
+    whose module doc gives the protocol); defaults are the paper's.
+
+    cover_resolution: the covering voxel of the plan of Ours whose views are perturbed (4 cm).
+    levels: (sigma_t in m, sigma_r in deg) pairs. draws: noise draws per noisy level (the
+    noise-free level is evaluated once). taus: F-score thresholds (m). fusion_voxel: the
+    de-duplication grid of the fused cloud (m). icp: evaluate without and/or with ICP refinement.
+    icp_voxel: downsampling of source view and passive target (m). icp_max_correspondence: one ICP
+    stage per distance (m), coarse to fine. icp_max_iterations: per stage. icp_min_fitness: accept
+    a refinement only at or above this final-stage fitness.
+    """
+
+    cover_resolution: float = 0.04
+    levels: tuple = PAPER_NOISE_LEVELS
+    draws: int = 5
+    seed: int = 0
+    taus: tuple = (0.01, 0.02)
+    fusion_voxel: float = 0.002
+    icp: tuple = (False, True)
+    icp_method: str = "point_to_plane"
+    icp_voxel: float = 0.01
+    icp_max_correspondence: tuple = (0.05, 0.02, 0.01)
+    icp_max_iterations: int = 10
+    icp_min_fitness: float = 0.3
+
+    def __post_init__(self):
+        _positive(self, "cover_resolution")
+        try:
+            levels = tuple((float(t), float(r)) for t, r in self.levels)
+        except (TypeError, ValueError):
+            raise ConfigError(f"levels must be (sigma_t, sigma_r) pairs, got {self.levels!r}") from None
+        if not levels or any(not (math.isfinite(t) and math.isfinite(r) and t >= 0 and r >= 0) for t, r in levels):
+            raise ConfigError(f"levels must be non-negative finite (sigma_t m, sigma_r deg) pairs, got {self.levels!r}")
+        if len(set(levels)) != len(levels):
+            raise ConfigError(f"levels must be distinct, got {self.levels!r}")
+        object.__setattr__(self, "levels", levels)
+        taus = tuple(float(t) for t in np.atleast_1d(self.taus))
+        if not taus or any(not (math.isfinite(t) and t > 0) for t in taus):
+            raise ConfigError(f"taus must be positive distances (m), got {self.taus!r}")
+        object.__setattr__(self, "taus", taus)
+        icp = tuple(bool(x) for x in np.atleast_1d(self.icp))
+        if not icp or len(set(icp)) != len(icp):
+            raise ConfigError(f"icp must list False and/or True once each, got {self.icp!r}")
+        object.__setattr__(self, "icp", icp)
+        for name, low in (("draws", 1), ("icp_max_iterations", 1), ("seed", 0)):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
+                raise ConfigError(f"{name} must be an integer >= {low}, got {value!r}")
+        try:
+            stages = tuple(float(d) for d in np.atleast_1d(self.icp_max_correspondence))
+        except (TypeError, ValueError):
+            stages = ()
+        if not stages or any(not (math.isfinite(d) and d > 0) for d in stages):
+            raise ConfigError("icp_max_correspondence must be one or more positive distances (m), "
+                              f"got {self.icp_max_correspondence!r}")
+        object.__setattr__(self, "icp_max_correspondence", stages)
+        for name in ("fusion_voxel", "icp_voxel"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+                raise ConfigError(f"{name} must be a positive number of metres, got {value!r}")
+        if not (isinstance(self.icp_min_fitness, (int, float)) and 0.0 <= self.icp_min_fitness <= 1.0):
+            raise ConfigError(f"icp_min_fitness must be in [0, 1], got {self.icp_min_fitness!r}")
+        if self.icp_method not in ICP_METHODS:
+            raise ConfigError(f"unknown icp_method {self.icp_method!r}; choose one of {', '.join(ICP_METHODS)}")
+
+
+@dataclass(frozen=True)
 class RowConfig:
     """Greenhouse-row setting (the paper's Tables V-VII); defaults = the ``paper-row`` configuration.
 
-    oracle_grid: spacing of the view-box grid of the FOV-free oracle (10 x gt_resolution).
-    The registration section holds the row's control-node spacing (0.15 m, not derived).
+    view_space: the room (``room1``, ``room4``; its boxes, candidate positions and passive sweep
+    are :func:`tpvp.scene.boxes.room_config`). oracle_grid: spacing of the view-box grid of the
+    FOV-free oracle (10 x gt_resolution). The registration section holds the row's control-node
+    spacing (0.15 m, not derived). protocol: what the experiments sweep (Tables V-VI);
+    pose_noise: the Table VII study; blockwise: the Block-wise NBV baseline.
     """
 
     name: str = "paper-row"
@@ -228,7 +327,7 @@ class RowConfig:
     gt_resolution: float = 0.01
     view_space: str = "room1"
     oracle_grid: float = 0.1
-    sensor: SensorConfig = field(default_factory=lambda: SensorConfig(max_range=2.0))
+    sensor: SensorConfig = field(default_factory=lambda: SensorConfig(max_range=ROW_RANGE))
     nbv: NbvConfig = field(default_factory=lambda: NbvConfig(pixel_stride=20))
     registration: RegistrationConfig = field(
         default_factory=lambda: RegistrationConfig(method="warp-field",
@@ -237,6 +336,9 @@ class RowConfig:
     selection: SelectionConfig = field(default_factory=lambda: SelectionConfig(cover_resolution=0.04))
     targets: RowTargetsConfig = field(default_factory=RowTargetsConfig)
     path: TspConfig = field(default_factory=TspConfig)
+    protocol: RowProtocolConfig = field(default_factory=RowProtocolConfig)
+    pose_noise: PoseNoiseConfig = field(default_factory=PoseNoiseConfig)
+    blockwise: BlockwiseNbvConfig = field(default_factory=BlockwiseNbvConfig)
 
     setting = "row"
 
@@ -276,7 +378,9 @@ DERIVED = {
         "inflation.gamma_far": ("1 x gt_resolution", lambda c: c["gt_resolution"]),
         "selection.cover_resolution": ("4 x gt_resolution (history_resolution_factor)",
                                        lambda c: 4 * c["gt_resolution"]),
-        "sensor.max_range": ("the view space's range (2.0 m rows)", lambda c: _view_space_range(c["view_space"])),
+        "sensor.max_range": (f"the view space's range ({ROW_RANGE} m rows)",
+                             lambda c: _view_space_range(c["view_space"])),
+        "pose_noise.seed": ("seed", lambda c: c["seed"]),
     },
 }
 
@@ -327,8 +431,14 @@ def flatten_keys(tree: dict, prefix: str = "") -> dict:
     return flat
 
 
+def _as_tuple(value) -> tuple:
+    """A YAML list (of lists) as the tuple (of tuples) a frozen configuration holds."""
+    return tuple(_as_tuple(v) if isinstance(v, (list, tuple)) else v for v in value)
+
+
 def _coerce(key: str, value, hint):
-    """``value`` checked against the field's type hint (int -> float allowed, ``X | None``)."""
+    """``value`` checked against the field's type hint (int -> float allowed, ``X | None``, a list
+    for a tuple; the section checks the tuple's items)."""
     options = typing.get_args(hint) if typing.get_origin(hint) in (typing.Union, types.UnionType) else (hint,)
     for option in options:
         if option is type(None) and value is None:
@@ -341,7 +451,10 @@ def _coerce(key: str, value, hint):
             return float(value)
         if option is str and isinstance(value, str):
             return value
-    words = {bool: "true or false", int: "an integer", float: "a number", str: "a string", type(None): "null"}
+        if option is tuple and isinstance(value, (list, tuple)):
+            return _as_tuple(value)
+    words = {bool: "true or false", int: "an integer", float: "a number", str: "a string", type(None): "null",
+             tuple: "a list"}
     expected = " or ".join(words.get(o, getattr(o, "__name__", str(o))) for o in options)
     raise ConfigError(f"configuration key {key!r}: expected {expected}, got {value!r}")
 

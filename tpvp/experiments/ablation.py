@@ -19,7 +19,7 @@ import pandas as pd
 from scipy import sparse
 
 from tpvp.config import with_overrides
-from tpvp.experiments.plants import _mean_std, default_cases, method_config
+from tpvp.experiments.plants import mean_std, default_cases, method_config
 from tpvp.experiments.single_plant import planning_visibility, run_case, transfer
 from tpvp.inflation.inflate import SURFACE_LAYERS as ORIGINS
 from tpvp.metrics.geometry import chamfer_distance, nearest_distances
@@ -289,7 +289,7 @@ def pooled_table(raw: pd.DataFrame, methods=ABLATION_METHODS) -> pd.DataFrame:
     methods in the order of ``methods``."""
     rows = raw[raw["method"].isin(list(methods)) & raw["views"].notna()]
     order = {m: i for i, m in enumerate(methods)}
-    table = _mean_std(rows, ["source", "method"],
+    table = mean_std(rows, ["source", "method"],
                       columns=("views", "coverage", "path_length_m", "chamfer_truth_mm"))
     sources = {source: i for i, source in enumerate(dict.fromkeys(rows["source"]))}  # as they come
     return table.sort_values(["source", "method"], key=lambda c: c.map(order if c.name == "method" else sources),

@@ -340,7 +340,7 @@ def cached_experiments(cases, methods, config: PlantConfig | None = None, cache_
 # --------------------------------------------------------------------------------------------------
 
 
-def _mean_std(frame: pd.DataFrame, by: list, columns=("views", "coverage", "path_length_m")) -> pd.DataFrame:
+def mean_std(frame: pd.DataFrame, by: list, columns=("views", "coverage", "path_length_m")) -> pd.DataFrame:
     frame = frame.copy()
     frame["coverage"] = 100 * frame["coverage"]
     grouped = frame.groupby(by, sort=False, dropna=False)
@@ -372,17 +372,17 @@ def tables(raw: pd.DataFrame) -> dict:
     gmc_rows = done[(done["method"] == "gmc") & done["budget"].isin(GMC_BUDGETS)]
     one_shot = done[~done["method"].isin(["gmc", "optimum"])]
     table1 = pd.concat([
-        _mean_std(gmc_rows, ["source", "view_space", "method", "budget"]),
-        _mean_std(one_shot, ["source", "view_space", "method"]),
-        _mean_std(done[done["method"] == "optimum"], ["source", "view_space", "method", "target"]),
+        mean_std(gmc_rows, ["source", "view_space", "method", "budget"]),
+        mean_std(one_shot, ["source", "view_space", "method"]),
+        mean_std(done[done["method"] == "optimum"], ["source", "view_space", "method", "target"]),
         pending.groupby(["source", "view_space", "method", "status"]).size().rename("cases").reset_index(),
     ], ignore_index=True)
     table1["budget"] = table1["budget"].astype("Int64")
-    table2 = _mean_std(done[done["method"] == "ours"], ["source", "species", "view_space"])
-    table3 = _mean_std(done[done["method"].isin(["ours", "ours-no-inflation"])], ["source", "species", "method"])
-    table4 = _mean_std(done[done["method"].isin(["ours", "initial-view-only"])], ["source", "method"],
+    table2 = mean_std(done[done["method"] == "ours"], ["source", "species", "view_space"])
+    table3 = mean_std(done[done["method"].isin(["ours", "ours-no-inflation"])], ["source", "species", "method"])
+    table4 = mean_std(done[done["method"].isin(["ours", "initial-view-only"])], ["source", "method"],
                        columns=("chamfer_truth_mm", "chamfer_after_mm"))
-    timing = _mean_std(done, ["source", "method"], columns=("seconds_planning", "seconds_task"))
+    timing = mean_std(done, ["source", "method"], columns=("seconds_planning", "seconds_task"))
     return {"table1_coverage_effort": table1, "table2_plant_complexity": table2, "table3_inflation": table3,
             "table4_registration": table4, "planning_time": timing, "optimum_ratio": optimum_ratio(done)}
 
@@ -404,7 +404,7 @@ def optimum_ratio(done: pd.DataFrame) -> pd.DataFrame:
         rows["views_ratio_98"] = rows["views"] / rows["optimum_views_98"]
     columns = [c for c in ("views", "coverage", "optimum_views_same_coverage", "views_ratio", "optimum_views_98",
                            "views_ratio_98") if c in rows]
-    return _mean_std(rows, ["source", "view_space", "method"], columns=columns)
+    return mean_std(rows, ["source", "view_space", "method"], columns=columns)
 
 
 def markdown(table: pd.DataFrame) -> str:

@@ -6,7 +6,8 @@ misaligned points. Optionally each active view is then refined by a light rigid 
 passive map, and the fused cloud is compared with the ground-truth surface (symmetric Chamfer
 distance, F-score at 1 and 2 cm).
 
-Protocol decisions (the paper leaves them open; all are fields of :class:`PoseNoiseConfig`):
+Protocol decisions (the paper leaves them open; all are fields of :class:`tpvp.config.PoseNoiseConfig`,
+the ``pose_noise`` section of the row configuration):
 
 * **Noise model.** Per view, the position gets ``N(0, sigma_t^2)`` per axis; the orientation is
   turned about a uniformly random axis by an angle ``theta ~ N(0, sigma_r^2)`` (the paper's
@@ -20,7 +21,7 @@ Protocol decisions (the paper leaves them open; all are fields of :class:`PoseNo
   across levels is not masked by draw-to-draw scatter). The noise-free level is evaluated once
   (it is deterministic) and reported as one row.
 * **What is measured.** With the authors' voxel-driven sensor (``SensorConfig.model ==
-  "reference"``, the default here with the rows' 2.0 m range), a view measures the centres of the
+  "reference"``, the default here with the rows' range, ``ROW_SENSOR``), a view measures the centres of the
   ground-truth voxels it observes, as the OctoMap simulator does (so the noise-free precision at
   tau = 1 cm is exactly 100 %, as in Table VII). With the ``pixel`` model it measures the back-
   projected depth image: one surface point per (strided) pixel, on the face of the voxel hit.
@@ -53,80 +54,21 @@ from __future__ import annotations
 import math
 import time
 import weakref
-from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
 from scipy.spatial import cKDTree
 
+from tpvp.config import PoseNoiseConfig
 from tpvp.errors import ConfigError, checked_cloud
 from tpvp.scene import voxels
 from tpvp.scene.grid import OccupancyGrid
 from tpvp.sensor import kernels
-from tpvp.sensor.sensor import SensorConfig, check_camera, observe_poses, view_poses
+from tpvp.sensor.sensor import ROW_SENSOR, SensorConfig, check_camera, observe_poses, view_poses
 
-GREENHOUSE_SENSOR = SensorConfig(model="reference", max_range=2.0)
-PAPER_LEVELS = ((0.0, 0.0), (0.002, 0.5), (0.005, 1.0), (0.01, 2.0))
-ICP_METHODS = ("point_to_plane", "point_to_point")
 _NORMAL_RADIUS_VOXELS = 3.0
 _NORMAL_NEIGHBOURS = 30
 _CROP_SLACK = 0.10  # m a view may move during ICP beyond the correspondence distance
-
-
-@dataclass(frozen=True)
-class PoseNoiseConfig:
-    """Parameters of the pose-noise study; defaults are the paper's protocol (see module doc)."""
-
-    levels: tuple = PAPER_LEVELS  # (sigma_t in m, sigma_r in deg) pairs
-    draws: int = 5  # noise draws per noisy level (the noise-free level is evaluated once)
-    seed: int = 0
-    taus: tuple = (0.01, 0.02)  # F-score thresholds (m)
-    fusion_voxel: float = 0.002  # de-duplication grid of the fused cloud (m)
-    icp: tuple = (False, True)  # evaluate without and/or with ICP refinement (noisy levels only)
-    icp_method: str = "point_to_plane"
-    icp_voxel: float = 0.01  # downsampling of source view and passive target (m)
-    icp_max_correspondence: tuple = (0.05, 0.02, 0.01)  # m, one ICP stage each, coarse to fine
-    icp_max_iterations: int = 10  # per stage
-    icp_min_fitness: float = 0.3  # accept a refinement only at or above this (final-stage) fitness
-
-    def __post_init__(self):
-        try:
-            levels = tuple((float(t), float(r)) for t, r in self.levels)
-        except (TypeError, ValueError):
-            raise ConfigError(f"levels must be (sigma_t, sigma_r) pairs, got {self.levels!r}") from None
-        if not levels or any(not (math.isfinite(t) and math.isfinite(r) and t >= 0 and r >= 0) for t, r in levels):
-            raise ConfigError(f"levels must be non-negative finite (sigma_t m, sigma_r deg) pairs, got {self.levels!r}")
-        if len(set(levels)) != len(levels):
-            raise ConfigError(f"levels must be distinct, got {self.levels!r}")
-        object.__setattr__(self, "levels", levels)
-        taus = tuple(float(t) for t in np.atleast_1d(self.taus))
-        if not taus or any(not (math.isfinite(t) and t > 0) for t in taus):
-            raise ConfigError(f"taus must be positive distances (m), got {self.taus!r}")
-        object.__setattr__(self, "taus", taus)
-        icp = tuple(bool(x) for x in np.atleast_1d(self.icp))
-        if not icp or len(set(icp)) != len(icp):
-            raise ConfigError(f"icp must list False and/or True once each, got {self.icp!r}")
-        object.__setattr__(self, "icp", icp)
-        for name, low in (("draws", 1), ("icp_max_iterations", 1), ("seed", 0)):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
-                raise ConfigError(f"{name} must be an integer >= {low}, got {value!r}")
-        try:
-            stages = tuple(float(d) for d in np.atleast_1d(self.icp_max_correspondence))
-        except (TypeError, ValueError):
-            stages = ()
-        if not stages or any(not (math.isfinite(d) and d > 0) for d in stages):
-            raise ConfigError("icp_max_correspondence must be one or more positive distances (m), "
-                              f"got {self.icp_max_correspondence!r}")
-        object.__setattr__(self, "icp_max_correspondence", stages)
-        for name in ("fusion_voxel", "icp_voxel"):
-            value = getattr(self, name)
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
-                raise ConfigError(f"{name} must be a positive number of metres, got {value!r}")
-        if not (isinstance(self.icp_min_fitness, (int, float)) and 0.0 <= self.icp_min_fitness <= 1.0):
-            raise ConfigError(f"icp_min_fitness must be in [0, 1], got {self.icp_min_fitness!r}")
-        if self.icp_method not in ICP_METHODS:
-            raise ConfigError(f"unknown icp_method {self.icp_method!r}; choose one of {', '.join(ICP_METHODS)}")
 
 
 # ============================================================================ noise
@@ -204,7 +146,7 @@ def _pixel_world_points(grid: OccupancyGrid, position, rotation, sensor: SensorC
                      for i in range(3)], axis=1)
 
 
-def render_views(grid: OccupancyGrid, positions, rotations, sensor: SensorConfig = GREENHOUSE_SENSOR) -> list:
+def render_views(grid: OccupancyGrid, positions, rotations, sensor: SensorConfig = ROW_SENSOR) -> list:
     """World points measured by each view given as a pose (``(V, 3)``, ``(V, 3, 3)``): observed
     voxel centres (``reference`` model, all views at once) or back-projected depth (``pixel``)."""
     positions = np.array(positions, dtype=np.float64, order="C").reshape(-1, 3)
@@ -218,7 +160,7 @@ def render_views(grid: OccupancyGrid, positions, rotations, sensor: SensorConfig
     return [_pixel_world_points(grid, p, r, sensor) for p, r in zip(positions, rotations)]
 
 
-def render_view_points(grid: OccupancyGrid, position, rotation, sensor: SensorConfig = GREENHOUSE_SENSOR) -> np.ndarray:
+def render_view_points(grid: OccupancyGrid, position, rotation, sensor: SensorConfig = ROW_SENSOR) -> np.ndarray:
     """``(N, 3)`` points one view measures, in its camera frame (OpenCV: +z optical axis, +x right,
     +y down; ``rotation`` is camera-to-world, as :func:`tpvp.sensor.camera.look_at_rotation`)."""
     position = np.asarray(position, dtype=np.float64).reshape(3)
@@ -241,7 +183,7 @@ def _relative_transforms(nominal_positions, nominal_rotations, true_positions, t
 
 
 def measure_views(grid: OccupancyGrid, nominal_positions, nominal_rotations, true_positions=None,
-                  true_rotations=None, sensor: SensorConfig = GREENHOUSE_SENSOR) -> list:
+                  true_rotations=None, sensor: SensorConfig = ROW_SENSOR) -> list:
     """Per active view, its points rendered from the true pose and expressed at the nominal pose
     (world frame). Views whose true pose equals the nominal one are returned as rendered."""
     nominal_positions = np.asarray(nominal_positions, dtype=np.float64).reshape(-1, 3)
@@ -273,7 +215,7 @@ def deduplicate(points, voxel: float) -> np.ndarray:
 
 
 def fuse(grid: OccupancyGrid, nominal_positions, nominal_rotations, true_positions, true_rotations,
-         sensor: SensorConfig = GREENHOUSE_SENSOR, *, passive_points=None, voxel: float = 0.002) -> np.ndarray:
+         sensor: SensorConfig = ROW_SENSOR, *, passive_points=None, voxel: float = 0.002) -> np.ndarray:
     """Fused cloud: ``passive_points`` (noise-free, first) plus every active view rendered from its
     true pose and fused at its nominal pose, de-duplicated on a ``voxel`` grid (:func:`deduplicate`)."""
     views = measure_views(grid, nominal_positions, nominal_rotations, true_positions, true_rotations, sensor)
@@ -286,7 +228,7 @@ def _fuse_views(views, passive_points, voxel):
     return deduplicate(np.concatenate(parts) if parts else np.zeros((0, 3)), voxel)
 
 
-def passive_map(grid: OccupancyGrid, positions, look_ats, sensor: SensorConfig = GREENHOUSE_SENSOR,
+def passive_map(grid: OccupancyGrid, positions, look_ats, sensor: SensorConfig = ROW_SENSOR,
                 voxel: float = 0.002) -> np.ndarray:
     """Noise-free fused points of the passive views (position + look-at), the ICP target."""
     positions, rotations = view_poses(grid, positions, look_ats)
@@ -381,7 +323,7 @@ def _drift_mm(views_fused, views_true) -> float:
 
 
 def pose_noise_study(truth_points, grid: OccupancyGrid, passive_points, active_positions, active_look_ats,
-                     config: PoseNoiseConfig = PoseNoiseConfig(), sensor: SensorConfig = GREENHOUSE_SENSOR,
+                     config: PoseNoiseConfig = PoseNoiseConfig(), sensor: SensorConfig = ROW_SENSOR,
                      *, progress: bool = False) -> pd.DataFrame:
     """One row per (level, draw, ICP off/on): ``sigma_t_m, sigma_r_deg, draw, icp, n_points,
     chamfer_mm, precision_/recall_/f1_<tau>mm, icp_accepted, icp_fitness, drift_mm, seconds``.
@@ -413,7 +355,7 @@ def pose_noise_study(truth_points, grid: OccupancyGrid, passive_points, active_p
 
 def noisy_reconstructions(grid: OccupancyGrid, positions, rotations, passive_points, sigma_t: float,
                           sigma_r_deg: float, draw: int, config: PoseNoiseConfig = PoseNoiseConfig(),
-                          sensor: SensorConfig = GREENHOUSE_SENSOR, icp_target=None) -> dict:
+                          sensor: SensorConfig = ROW_SENSOR, icp_target=None) -> dict:
     """One draw of one noise level: ``{icp (False/True): {"cloud", "icp_accepted", "icp_fitness",
     "drift_mm", "seconds"}}`` for each ICP setting of ``config.icp`` (noise-free: ICP off only).
     ``icp_target``: :func:`prepare_icp_target` of the passive map (built here when needed)."""

@@ -2,53 +2,57 @@
 
 A *case* is one consecutive session pair of one row (default: generated rows of room1 and room4,
 five sessions each, 4 pairs per row = 8 cases; or the real rows of a cleaned dataset folder). A
-*method* is a named entry of :data:`ROW_METHODS` that turns a case's scene into result rows. The
-runner, the cache and the parallel execution are those of the plant experiments
-(:mod:`tpvp.experiments.runner`).
+*method* is a named entry of :data:`ROW_METHODS`, ``method(scene, config) -> rows``, that turns a
+case's scene into result rows; what it sweeps (covering voxels, budgets, repetitions) is in the one
+:class:`tpvp.config.RowConfig` (``protocol``, ``pose_noise``, ``blockwise``). The runner, the cache
+and the parallel execution are those of the plant experiments (:mod:`tpvp.experiments.runner`).
 """
 
 from __future__ import annotations
 
-import hashlib
 import json
 import re
 import time
-from dataclasses import asdict, dataclass, replace
+from dataclasses import dataclass, replace
 from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-from tpvp import __version__
-from tpvp.config import RowConfig, make_config, to_dict
-from tpvp.errors import ConfigError, InputFileError
-from tpvp.experiments.runner import RESULTS_VERSION, all_cached, cached_table, run_cases
+from tpvp.config import RowConfig, config_yaml, make_config
+from tpvp.errors import InputFileError
+from tpvp.experiments import runner
+from tpvp.experiments.greenhouse import (build_row_scene, candidate_truth, random_selection, row_candidates,
+                                         row_coverage, row_transfer, run_row_case, upper_limit)
+from tpvp.experiments.plants import mean_std, markdown
+from tpvp.experiments.pose_noise import passive_map, pose_noise_study, summarise
+from tpvp.experiments.runner import Experiment, shared
+from tpvp.io import atomic_write_text, read_point_cloud
+from tpvp.io.publish import staged_folder
+from tpvp.nbv.blockwise import blockwise_nbv
+from tpvp.provenance import provenance
 from tpvp.registry import Registry
+from tpvp.scene.boxes import ROOMS, room_config
+from tpvp.synthetic.greenhouse import DATES, generate_row_sessions
+from tpvp.synthetic.scan import handheld_scan
+from tpvp.viewspace.lookat import PRIORS
+from tpvp.viewspace.priors import AUTHORS_PRIORS
+from tpvp.visibility import coverage_ratio
+from tpvp.viz.rows import plot_row_frontier
 
-ROOMS = ("room1", "room4")
 SESSIONS = 5
-PRIORS = ("obb", "passive", "transfer")
+# --quick: a 2 cm ground truth (the oracle grid and the inflation voxels follow their rules: 0.2 m,
+# 2 cm), two covering voxels, fewer budgets and draws.
+QUICK = {"gt_resolution": 0.02, "protocol.cover_resolutions": (0.10, 0.05), "protocol.budgets": (100, 300),
+         "protocol.repetitions": 2, "protocol.nbv_budgets": (50, 100), "pose_noise.draws": 1,
+         "pose_noise.cover_resolution": 0.10, "pose_noise.levels": ((0.0, 0.0), (0.01, 2.0))}
 PAPER_TABLE = Path(__file__).resolve().parent.parent / "data" / "paper" / "greenhouse_rows.csv"
 PAPER_POSE_NOISE = PAPER_TABLE.with_name("pose_noise.csv")
 PAPER_TIMING = PAPER_TABLE.with_name("row_timing.csv")
 SESSION_FILE = re.compile(r"^(?P<room>room\d+)_(?P<date>20\d{6})\.(pcd|ply)$")
 
 ROW_METHODS = Registry("row experiment method")
-
-
-@dataclass(frozen=True)
-class RowSettings:
-    """What the baselines sweep: Ours' covering voxels (m), the random baselines' budgets and
-    repetitions, Block-wise NBV's budgets (prefixes of one run of the largest)."""
-
-    cover_resolutions: tuple = (0.10, 0.05, 0.04, 0.03)
-    budgets: tuple = (100, 300, 500)
-    repetitions: int = 5
-    nbv_budgets: tuple = (100, 300, 500)
-    pose_noise_draws: int = 5
-    pose_noise_levels: tuple = ((0.0, 0.0), (0.002, 0.5), (0.005, 1.0), (0.01, 2.0))  # (sigma_t m, sigma_r deg)
-    pose_noise_resolution: float = 0.04  # Table VII: Ours at 4 cm
 
 
 @dataclass(frozen=True)
@@ -76,30 +80,25 @@ class RowCase:
     def labels(self) -> dict:
         return {"source": self.source, "room": self.room, "case": self.name, "previous_session": self.previous}
 
+    def config(self, base: RowConfig) -> RowConfig:
+        """``base`` in this case's room."""
+        return replace(base, view_space=self.room)
+
     @property
     def date(self) -> str | None:
         """YYYYMMDD of the current session (a generated session k stands for the dataset's k-th date)."""
         if self.files:
             match = SESSION_FILE.match(Path(self.files[1]).name)
             return match["date"] if match else None
-        from tpvp.synthetic.greenhouse import DATES
-
         return DATES[self.previous + 1]
 
     def load(self) -> tuple[np.ndarray, np.ndarray]:
         if self.files:
-            from tpvp.io import read_point_cloud
-
             return tuple(read_point_cloud(Path(f), units="m") for f in self.files)
-        from tpvp.synthetic.greenhouse import generate_row_sessions
-
         sessions = generate_row_sessions(self.room, self.seed, self.previous + 2, self.point_spacing)
         pair = sessions[self.previous].points, sessions[self.previous + 1].points
         if not self.scanned:
             return pair
-        from tpvp.scene.boxes import room_config
-        from tpvp.synthetic.scan import handheld_scan
-
         return tuple(points[handheld_scan(points, room_config(self.room))] for points in pair)
 
 
@@ -132,66 +131,38 @@ def default_row_cases(quick: bool = False, dataset=None, rooms=ROOMS, seed: int 
 
 
 def quick_config(overrides: dict | None = None) -> RowConfig:
-    """A coarse configuration for CI and quick notebooks: 2 cm ground truth; the oracle grid and
-    the inflation voxels follow their rules (0.2 m, 2 cm)."""
-    return make_config("row", {"gt_resolution": 0.02} | dict(overrides or {}))
-
-
-def quick_settings() -> RowSettings:
-    return RowSettings(cover_resolutions=(0.10, 0.05), budgets=(100, 300), repetitions=2, nbv_budgets=(50, 100),
-                       pose_noise_draws=1, pose_noise_resolution=0.10, pose_noise_levels=((0.0, 0.0), (0.01, 2.0)))
+    """A coarse configuration for CI and quick notebooks (:data:`QUICK`), then ``overrides``."""
+    return make_config("row", QUICK | dict(overrides or {}))
 
 
 # --------------------------------------------------------------------------------------------------
 # methods
 # --------------------------------------------------------------------------------------------------
 
-_memo: dict = {}
-
-
-def _shared(scene, key, compute):
-    """Per-process memo of what several methods of one scene need (transfer, candidates, their
-    ground-truth visibility)."""
-    if _memo.get("scene") is not scene:
-        _memo.clear()
-        _memo["scene"] = scene
-    if key not in _memo:
-        _memo[key] = compute()
-    return _memo[key]
-
-
 def _transfer(scene, config):
-    from tpvp.experiments.greenhouse import row_transfer
-
-    return _shared(scene, ("transfer", repr(config.registration), repr(config.inflation)),
+    return shared(scene, ("transfer", repr(config.registration), repr(config.inflation)),
                    lambda: row_transfer(scene, config))
 
 
 def _candidates(scene, prior, config):
-    from tpvp.experiments.greenhouse import candidate_truth, row_candidates
-
     def compute():
         t = time.perf_counter()
         candidates = row_candidates(scene, prior, config, _transfer(scene, config) if prior == "transfer" else None)
         return candidates, candidate_truth(scene, candidates), time.perf_counter() - t
 
-    return _shared(scene, ("candidates", prior, repr(config.targets)), compute)
+    return shared(scene, ("candidates", prior, repr(config.targets)), compute)
 
 
 @ROW_METHODS.register("coarse", "the passive sweep alone (15 fixed views)")
-def coarse(scene, config, settings):
-    from tpvp.experiments.greenhouse import row_coverage
-
+def coarse(scene, config):
     return [{"views": len(scene.room.initial_positions), "coverage": row_coverage(scene, []),
              "path_length_m": scene.room.passive_cost, "seconds_planning": 0.0}]
 
 
 @ROW_METHODS.register("ours", "the paper's method at each covering voxel (passive warm start included)")
-def ours(scene, config, settings):
-    from tpvp.experiments.greenhouse import run_row_case
-
+def ours(scene, config):
     rows = []
-    for resolution in settings.cover_resolutions:
+    for resolution in config.protocol.cover_resolutions:
         case_config = replace(config, selection=replace(config.selection, cover_resolution=float(resolution)))
         result = run_row_case(scene, case_config, transferred=_transfer(scene, config))
         rows.append({"prior": "transfer", "cover_resolution_cm": round(100 * resolution, 3), **result.summary()})
@@ -199,13 +170,11 @@ def ours(scene, config, settings):
 
 
 def _random(prior):
-    def method(scene, config, settings):
-        from tpvp.experiments.greenhouse import random_selection
-
+    def method(scene, config):
         candidates, truth, seconds = _candidates(scene, prior, config)
         return [{"prior": prior, **random_selection(scene, candidates, truth, budget, repetition, config,
                                                     with_passive=prior != "obb"), "seconds_candidates": seconds}
-                for budget in settings.budgets for repetition in range(settings.repetitions)]
+                for budget in config.protocol.budgets for repetition in range(config.protocol.repetitions)]
     return method
 
 
@@ -215,9 +184,7 @@ for _prior in PRIORS:
 
 
 @ROW_METHODS.register("upper-limit", "Table V: the share of the oracle all 800 candidates of each prior reach")
-def upper_limit_rows(scene, config, settings):
-    from tpvp.experiments.greenhouse import upper_limit
-
+def upper_limit_rows(scene, config):
     rows = []
     for prior in PRIORS:
         candidates, truth, seconds = _candidates(scene, prior, config)
@@ -227,39 +194,31 @@ def upper_limit_rows(scene, config, settings):
 
 
 @ROW_METHODS.register("blockwise-nbv", "sequential block-wise NBV (Zaenker et al. 2021); budgets are prefixes of one run")
-def blockwise(scene, config, settings):
-    from tpvp.nbv.blockwise import blockwise_nbv
-    from tpvp.visibility import coverage_ratio
-
-    run = blockwise_nbv(scene.grid, scene.room, max(settings.nbv_budgets), sensor=config.sensor, seed=config.seed)
+def blockwise(scene, config):
+    budgets = config.protocol.nbv_budgets
+    run = blockwise_nbv(scene.grid, scene.room, max(budgets), config.blockwise, sensor=config.sensor, seed=config.seed)
     return [{"budget": int(budget), "views": int(budget),
              "coverage": coverage_ratio(np.flatnonzero(run.covered_after(budget)), scene.oracle),
              "path_length_m": run.path_after(budget), "seconds_planning": float(np.sum(run.seconds[:budget])),
              "seconds_per_iteration": float(np.mean(run.seconds[:budget]))}
-            for budget in settings.nbv_budgets]
+            for budget in budgets]
 
 
 @ROW_METHODS.register("pose-noise", "Table VII: Ours' executed views with pose noise, fused with and without ICP")
-def pose_noise(scene, config, settings):
-    from tpvp.experiments.greenhouse import run_row_case
-    from tpvp.experiments.pose_noise import PoseNoiseConfig, passive_map, pose_noise_study
-
-    case_config = replace(config, selection=replace(config.selection, cover_resolution=settings.pose_noise_resolution))
+def pose_noise(scene, config):
+    noise = config.pose_noise
+    case_config = replace(config, selection=replace(config.selection, cover_resolution=noise.cover_resolution))
     plan = run_row_case(scene, case_config, transferred=_transfer(scene, config))
-    noise = PoseNoiseConfig(levels=tuple(map(tuple, settings.pose_noise_levels)), draws=settings.pose_noise_draws,
-                            seed=config.seed)
     passive = passive_map(scene.grid, scene.room.initial_positions, scene.room.initial_look_ats, scene.sensor)
     # The ground-truth surface: the current session's points (1 cm voxel centroids), not the voxel
     # centres a view measures, so a perfect fusion still sits a few mm from it, as in the paper.
     table = pose_noise_study(scene.current, scene.grid, passive, plan.positions, plan.look_ats, noise, scene.sensor)
-    return [{"views": plan.n_views, "cover_resolution_cm": round(100 * settings.pose_noise_resolution, 3), **row}
+    return [{"views": plan.n_views, "cover_resolution_cm": round(100 * noise.cover_resolution, 3), **row}
             for row in table.to_dict(orient="records")]
 
 
 @ROW_METHODS.register("upper-limit-authors", "Table V with the authors' own look-at files (gap_1) of the same date")
-def upper_limit_authors(scene, config, settings):
-    from tpvp.experiments.greenhouse import AUTHORS_PRIORS, upper_limit
-
+def upper_limit_authors(scene, config):
     rows = []
     for prior in AUTHORS_PRIORS:
         candidates, truth, seconds = _candidates(scene, f"authors-{prior}", config)
@@ -277,74 +236,43 @@ ALL_METHODS = ("coarse", "blockwise-nbv", "ours", "prior-obb-random", "prior-pas
 # --------------------------------------------------------------------------------------------------
 
 
-def task_key(case: RowCase, method: str, config: RowConfig, settings: RowSettings) -> str:
-    payload = {"case": asdict(case), "method": method, "config": to_dict(config), "settings": asdict(settings),
-               "version": __version__, "results": RESULTS_VERSION}
-    return hashlib.sha256(json.dumps(payload, sort_keys=True, default=str).encode()).hexdigest()[:20]
-
-
 @lru_cache(maxsize=1)
 def _scene(case: RowCase, config: RowConfig, oracle_cache):
-    from tpvp.experiments.greenhouse import build_row_scene
-
     previous, current = case.load()
-    return build_row_scene(previous, current, config, room=case.room, names=(f"{case.name} (previous)",
-                                                                              f"{case.name} (current)"),
+    return build_row_scene(previous, current, config, names=(f"{case.name} (previous)", f"{case.name} (current)"),
                            cache_dir=oracle_cache, date=case.date)
 
 
-def run_row_task(case: RowCase, method: str, config: RowConfig, settings: RowSettings, cache_dir=None) -> pd.DataFrame:
-    """The rows of one (case, method), from the cache when present; written to it otherwise. The
-    case's oracle is cached in ``cache_dir/oracle`` (or the default cache folder)."""
-    path = Path(cache_dir) / f"{task_key(case, method, config, settings)}.parquet" if cache_dir else None
-    function = ROW_METHODS.get(method)
-    case_config = replace(config, view_space=case.room)
-
-    def compute():
-        t0 = time.perf_counter()
-        scene = _scene(case, case_config, str(cache_dir) if cache_dir else None)
-        rows = function(scene, case_config, settings)
-        seconds = time.perf_counter() - t0
-        extra = {"oracle_voxels": len(scene.oracle), "seconds_oracle": scene.timings.get("oracle", 0.0),
-                 "oracle_cached": scene.oracle_cached}
-        return pd.DataFrame([{**case.labels(), "method": method, **row, **extra, "seconds_task": seconds}
-                             for row in rows])
-
-    return cached_table(path, compute)
+def scene_columns(scene) -> dict:
+    return {"oracle_voxels": len(scene.oracle), "seconds_oracle": scene.timings.get("oracle", 0.0),
+            "oracle_cached": scene.oracle_cached}
 
 
-def run_row_case_tasks(case: RowCase, methods, config: RowConfig, settings: RowSettings, cache_dir=None) -> list:
-    return [run_row_task(case, method, config, settings, cache_dir) for method in methods]
+# The case's oracle is cached beside the rows (cache_dir/oracle) or in the default cache folder.
+ROW_EXPERIMENTS = Experiment("row experiments", ROW_METHODS, _scene, order=("room", "previous_session", "method"),
+                             scene_columns=scene_columns)
 
 
-def run_row_experiments(cases, methods=ALL_METHODS, config: RowConfig | None = None, settings: RowSettings = RowSettings(),
-                        cache_dir=None, workers: int = 1, progress: bool = True, scheduler=None) -> pd.DataFrame:
-    """Every (case, method) task, here, in ``workers`` processes or on a Dask cluster
-    (:func:`tpvp.experiments.runner.run_cases`); the raw table of all rows."""
-    config = config or make_config("row")
-    methods = list(methods)
-    for method in methods:
-        ROW_METHODS.get(method)  # an unknown name fails before any work
-    cases = list(cases)
-    if not cases or not methods:
-        raise ConfigError("no task: the case list or the method list is empty")
-    tables = run_cases(run_row_case_tasks, cases, (methods, config, settings, cache_dir), len(methods),
-                       workers=workers, scheduler=scheduler, progress=progress, desc="row experiments")
-    raw = pd.concat(tables, ignore_index=True)
-    order = {m: i for i, m in enumerate(methods)}
-    return raw.sort_values(["room", "previous_session", "method"],
-                           key=lambda c: c.map(order) if c.name == "method" else c, kind="stable").reset_index(drop=True)
+def task_key(case: RowCase, method: str, config: RowConfig) -> str:
+    return runner.task_key(case, method, config)
 
 
-def cached_row_experiments(cases, methods, config: RowConfig | None = None, settings: RowSettings = RowSettings(),
-                           cache_dir=None) -> pd.DataFrame | None:
-    """:func:`run_row_experiments`' table read from the cache when every (case, method) is there,
-    else None (nothing is computed)."""
-    config = config or make_config("row")
-    cases, methods = list(cases), list(methods)
-    if not all_cached(cache_dir, (task_key(case, method, config, settings) for case in cases for method in methods)):
-        return None
-    return run_row_experiments(cases, methods, config, settings, cache_dir=cache_dir, progress=False)
+def run_row_task(case: RowCase, method: str, config: RowConfig, cache_dir=None) -> pd.DataFrame:
+    """The rows of one (case, method), from the cache when present; written to it otherwise."""
+    return runner.run_task(ROW_EXPERIMENTS, case, method, config, cache_dir)
+
+
+def run_row_experiments(cases, methods=ALL_METHODS, config: RowConfig | None = None, cache_dir=None, workers: int = 1,
+                        progress: bool = True, scheduler=None) -> pd.DataFrame:
+    """Every (case, method) task (:func:`tpvp.experiments.runner.run_experiments`); the raw table.
+    What the methods sweep is ``config.protocol`` (and ``config.pose_noise``)."""
+    return runner.run_experiments(ROW_EXPERIMENTS, cases, methods, config or make_config("row"), cache_dir, workers,
+                                  progress, scheduler)
+
+
+def cached_row_experiments(cases, methods, config: RowConfig | None = None, cache_dir=None) -> pd.DataFrame | None:
+    """:func:`run_row_experiments`' table from the cache when every (case, method) is there, else None."""
+    return runner.cached_experiments(ROW_EXPERIMENTS, cases, methods, config or make_config("row"), cache_dir)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -371,15 +299,13 @@ def tables(raw: pd.DataFrame) -> dict:
     """Table V (upper limit per prior), Table VI (views, coverage, path per method and budget or
     covering voxel; random baselines averaged over repetitions first), planning time, each with the
     paper's numbers beside ours."""
-    from tpvp.experiments.plants import _mean_std
-
     raw = raw.copy()
     for column in ("prior", "budget", "cover_resolution_cm", "views", "coverage", "path_length_m",
                    "seconds_planning", "seconds_task"):
         if column not in raw:
             raw[column] = np.nan
     paper = paper_values()
-    upper = _mean_std(raw[raw["method"].isin(["upper-limit", "upper-limit-authors"])], ["source", "prior"],
+    upper = mean_std(raw[raw["method"].isin(["upper-limit", "upper-limit-authors"])], ["source", "prior"],
                       columns=("coverage", "views"))
     upper = upper.merge(paper[paper["table"] == "V"][["prior", "coverage_mean", "coverage_std"]]
                         .rename(columns={"coverage_mean": "paper_coverage_mean", "coverage_std": "paper_coverage_std"}),
@@ -389,7 +315,7 @@ def tables(raw: pd.DataFrame) -> dict:
     # Repetitions of a random baseline: one value per case first, then mean ± std across cases.
     per_case = main.groupby(keys + ["case"], dropna=False, sort=False)[["views", "coverage", "path_length_m"]] \
         .mean().reset_index()
-    table6 = _mean_std(per_case, keys)
+    table6 = mean_std(per_case, keys)
     paper6 = paper[paper["table"] == "VI"][["method", "budget", "cover_resolution_cm", "views_mean", "coverage_mean",
                                             "path_mean"]].rename(columns={"views_mean": "paper_views",
                                                                           "coverage_mean": "paper_coverage",
@@ -398,29 +324,21 @@ def tables(raw: pd.DataFrame) -> dict:
     timing_columns = [c for c in ("seconds_planning", "seconds_registration", "seconds_targets", "seconds_visibility",
                                   "seconds_selection", "seconds_path", "seconds_per_iteration", "seconds_oracle",
                                   "seconds_task") if c in raw]
-    timing = _mean_std(main[main["method"] != "pose-noise"], ["source", "method", "cover_resolution_cm"],
+    timing = mean_std(main[main["method"] != "pose-noise"], ["source", "method", "cover_resolution_cm"],
                        columns=timing_columns)
     out = {"table5_upper_limit": upper, "table6_coverage_effort": table6[table6["method"] != "pose-noise"],
            "planning_time": timing}
     noise = raw[raw["method"] == "pose-noise"]
     if len(noise):
-        from tpvp.experiments.pose_noise import summarise
-
         out["table7_pose_noise"] = pd.concat([summarise(rows).assign(source=source)
                                               for source, rows in noise.groupby("source")], ignore_index=True)
     return out
 
 
-def write_results(folder, raw: pd.DataFrame, config: RowConfig | None = None, settings: RowSettings = RowSettings()) -> dict:
+def write_results(folder, raw: pd.DataFrame, config: RowConfig | None = None) -> dict:
     """The raw table, Tables V-VI and timing (CSV + Markdown), the paper's values and the
-    coverage-path frontier figure, as one published folder (whole or not at all)."""
-    from tpvp.config import config_yaml
-    from tpvp.experiments.plants import markdown
-    from tpvp.io import atomic_write_text
-    from tpvp.io.publish import staged_folder
-    from tpvp.provenance import provenance
-    from tpvp.viz.rows import plot_row_frontier
-
+    coverage-path frontier figure, as one published folder (whole or not at all); ``config.yaml``
+    holds the configuration, what the experiments swept included."""
     config = config or make_config("row")
     written = {}
     with staged_folder(folder) as stage:
@@ -433,6 +351,5 @@ def write_results(folder, raw: pd.DataFrame, config: RowConfig | None = None, se
             written[name] = table
         plot_row_frontier(stage.folder / "figures" / "coverage_path_frontier.png", written["table6_coverage_effort"])
         atomic_write_text(stage.folder / "config.yaml", config_yaml(config, "base configuration of the row experiments"))
-        atomic_write_text(stage.folder / "settings.json", json.dumps(asdict(settings), indent=2) + "\n")
         atomic_write_text(stage.folder / "provenance.json", json.dumps(provenance(config), indent=2) + "\n")
     return written

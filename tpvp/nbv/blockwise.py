@@ -87,7 +87,7 @@ from tpvp.nbv.occupancy import FREE, MODE_CARVE, MODE_FREESPACE, MODE_GAIN, OCCU
 from tpvp.scene.boxes import OrientedBox, RoomConfig, room_config
 from tpvp.scene.grid import OccupancyGrid
 from tpvp.sensor.camera import look_at_rotation
-from tpvp.sensor.sensor import SensorConfig, observe_many
+from tpvp.sensor.sensor import ROW_SENSOR, SensorConfig, observe_many
 from tpvp.viewspace import lookat
 
 NOT_SEEN = np.iinfo(np.int32).max  # first_seen of a voxel that no view observed
@@ -259,7 +259,7 @@ class RowOccupancyMap:
         rots = np.einsum("ji,vjk->vik", self.box.rotation, look_at_rotations_fast(positions, look_ats))
         return origins, np.ascontiguousarray(rots)
 
-    def integrate(self, position, look_at, points, sensor: SensorConfig = SensorConfig(max_range=2.0),
+    def integrate(self, position, look_at, points, sensor: SensorConfig = ROW_SENSOR,
                   stride: int = 20, carve_pixels: bool = True) -> None:
         """Add one view: its returns ``points`` (world, e.g. observed truth-voxel centres) become
         occupied; free space is carved along the rays to them and, with ``carve_pixels``, along the
@@ -278,7 +278,7 @@ class RowOccupancyMap:
                    int(stride), float(sensor.max_range), self.state, self.resolution, self._own, self._own_tag,
                    bool(carve_pixels))
 
-    def gains(self, positions, look_ats, sensor: SensorConfig = SensorConfig(max_range=2.0),
+    def gains(self, positions, look_ats, sensor: SensorConfig = ROW_SENSOR,
               stride: int = 20) -> np.ndarray:
         """``(V,)`` int64: distinct unknown voxels visited by each view's pixel rays (``stride``)
         before the first occupied voxel, ``sensor.max_range`` or the map's end."""
@@ -503,7 +503,7 @@ class BlockwiseNbvResult:
 
 # ----------------------------------------------------------------------------- the run
 def blockwise_nbv(truth_grid: OccupancyGrid, room, budget: int, config: BlockwiseNbvConfig = BlockwiseNbvConfig(),
-                  sensor: SensorConfig = SensorConfig(max_range=2.0), start_views=None, seed: int = 0,
+                  sensor: SensorConfig = ROW_SENSOR, start_views=None, seed: int = 0,
                   progress=None) -> BlockwiseNbvResult:
     """Run the block-wise NBV for ``budget`` views on a ground-truth grid (see the module doc).
 

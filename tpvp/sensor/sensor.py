@@ -18,6 +18,7 @@ from tpvp.sensor import kernels
 from tpvp.sensor.camera import D435, Intrinsics, look_at_rotation
 
 MODELS = ("reference", "pixel")
+ROW_RANGE = 2.0  # m, sensor range of the greenhouse-row setting (the rooms' view spaces, the oracle, the sweeps)
 
 
 @dataclass(frozen=True)
@@ -25,7 +26,7 @@ class SensorConfig:
     """Measurement model and its parameters (defaults: single-plant setting of the paper)."""
 
     model: str = "reference"
-    max_range: float = 1.0  # m; 2.0 in greenhouse rows
+    max_range: float = 1.0  # m; ROW_RANGE in greenhouse rows
     pixel_stride: int = 1  # pixel model only
     intrinsics: Intrinsics = field(default=D435)
 
@@ -36,6 +37,9 @@ class SensorConfig:
             raise ConfigError(f"max_range must be > 0 m, got {self.max_range!r}")
         if int(self.pixel_stride) < 1:
             raise ConfigError(f"pixel_stride must be a positive integer, got {self.pixel_stride!r}")
+
+
+ROW_SENSOR = SensorConfig(max_range=ROW_RANGE)  # the reference model at the rows' range
 
 
 def check_camera(grid: OccupancyGrid, position) -> np.ndarray:

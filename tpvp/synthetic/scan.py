@@ -17,18 +17,17 @@ import numpy as np
 
 from tpvp.errors import checked_cloud
 from tpvp.scene import voxels
+from tpvp.scene.grid import build_grid
+from tpvp.sensor.sensor import ROW_RANGE, SensorConfig
+from tpvp.visibility import covered_voxels, safe_visibility
 
 SCAN_OFFSETS = ((0.0, 0.0), (1.0, 0.0), (-1.0, 0.0), (0.0, 1.0), (0.0, -1.0))  # (along, up) x offset
 
 
-def handheld_scan(points, room, resolution: float = 0.02, offset: float = 0.3, max_range: float = 2.0) -> np.ndarray:
+def handheld_scan(points, room, resolution: float = 0.02, offset: float = 0.3,
+                  max_range: float = ROW_RANGE) -> np.ndarray:
     """Boolean mask of the ``points`` (a row in ``room``'s frame) whose ``resolution`` voxel the
     aisle sweep observes (see the module doc)."""
-    from tpvp.experiments.greenhouse import safe_visibility
-    from tpvp.scene.grid import build_grid
-    from tpvp.sensor.sensor import SensorConfig
-    from tpvp.visibility import covered_voxels
-
     points = checked_cloud(points, "row")
     grid = build_grid(voxels.voxelise(points, resolution), resolution)
     box = room.plant_box

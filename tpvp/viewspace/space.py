@@ -16,7 +16,8 @@ import numpy as np
 
 from tpvp.errors import ConfigError, InputFileError
 from tpvp.registry import Registry
-from tpvp.scene.boxes import room_config
+from tpvp.scene.boxes import ROOMS, RoomConfig, room_config
+from tpvp.sensor.sensor import ROW_RANGE
 from tpvp.viewspace.tammes import generate_view_space
 
 DATA = Path(__file__).resolve().parent.parent / "data" / "view_spaces"
@@ -26,7 +27,6 @@ BUNDLED = {"hemisphere": "view_space_hemisphere32.txt", "sphere": "view_space_sp
 INITIAL_VIEW_INDICES = {"near_horizontal": 17, "oblique": 8, "near_top": 21}
 PLANT_RADIUS = 0.4  # m, radius of the bundled single-plant view spheres
 PLANT_RANGE = 1.0  # m, sensor range of the single-plant setting
-ROW_RANGE = 2.0  # m, sensor range of the greenhouse-row setting
 
 VIEW_SPACES = Registry("view space")
 
@@ -154,22 +154,21 @@ def sphere() -> ViewSpace:
     return replace(space, initial_views=dict(INITIAL_VIEW_INDICES))
 
 
-def _room(room: str) -> ViewSpace:
-    config = room_config(room)
+def room_view_space(room: RoomConfig) -> ViewSpace:
+    """The view space of a greenhouse room (``tpvp.scene.boxes.room_config``, where each room is
+    defined): its candidate positions, its passive sweep and the rows' sensor range."""
     # The planner assigns look-at targets per session (docs/greenhouse.md); until then every
     # candidate looks at the plant box centre.
-    return ViewSpace(room, config.candidate_positions, config.plant_box.center, max_range=ROW_RANGE,
-                     passive_views=config.initial_views, passive_cost=config.passive_cost, look_at_fixed=False)
+    return ViewSpace(room.room, room.candidate_positions, room.plant_box.center, max_range=ROW_RANGE,
+                     passive_views=room.initial_views, passive_cost=room.passive_cost, look_at_fixed=False)
 
 
-@VIEW_SPACES.register("room1", "greenhouse room 1: 1,000 candidate positions, 15 passive views")
-def room1() -> ViewSpace:
-    return _room("room1")
+def _named_room(room: str):
+    return lambda: room_view_space(room_config(room))
 
 
-@VIEW_SPACES.register("room4", "greenhouse room 4: 1,000 candidate positions, 15 passive views")
-def room4() -> ViewSpace:
-    return _room("room4")
+for _room in ROOMS:
+    VIEW_SPACES.register(_room, f"greenhouse {_room}: 1,000 candidate positions, 15 passive views")(_named_room(_room))
 
 
 def get_view_space(spec: str | Path) -> ViewSpace:

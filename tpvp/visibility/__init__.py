@@ -4,5 +4,6 @@ from tpvp.visibility.matrix import (  # noqa: F401
     coverage_ratio,
     covered_voxels,
     oracle_voxels,
+    safe_visibility,
     visibility_matrix,
 )

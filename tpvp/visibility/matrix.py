@@ -32,6 +32,18 @@ def visibility_matrix(grid: OccupancyGrid, positions, look_ats, config: SensorCo
     return sparse.vstack(blocks, format="csr").astype(bool)
 
 
+def safe_visibility(grid: OccupancyGrid, positions, look_ats, sensor: SensorConfig) -> sparse.csr_matrix:
+    """:func:`visibility_matrix`, with an empty row for each view whose camera lies inside an
+    occupied voxel (the sensor refuses such a camera; at a coarse covering voxel, a greenhouse
+    candidate near a leaf can be one). ``look_ats``: one per view or one for all."""
+    positions = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
+    look_ats = np.broadcast_to(np.asarray(look_ats, dtype=np.float64).reshape(-1, 3), positions.shape)
+    free = np.flatnonzero(~grid.is_occupied(positions))
+    seen = visibility_matrix(grid, positions[free], look_ats[free], sensor, progress=False)
+    rows = sparse.csr_matrix((np.ones(seen.nnz, bool), seen.indices, seen.indptr), shape=seen.shape).tocoo()
+    return sparse.csr_matrix((rows.data, (free[rows.row], rows.col)), shape=(len(positions), grid.size), dtype=bool)
+
+
 def oracle_voxels(matrix: sparse.spmatrix) -> np.ndarray:
     """Ids of voxels seen by at least one view (the oracle visible set Omega)."""
     return np.flatnonzero(np.asarray(matrix.sum(axis=0)).ravel() > 0)

@@ -19,6 +19,7 @@ from tqdm.auto import tqdm
 from tpvp.errors import ConfigError
 from tpvp.scene.grid import OccupancyGrid
 from tpvp.sensor.raycast import cast_ray
+from tpvp.sensor.sensor import ROW_RANGE
 
 
 @njit(cache=True)
@@ -71,7 +72,7 @@ def _oracle_chunk(ids, viewpoints, centres, index, clearance, lo, res, max_range
                                           max_range_sq, first_tries, blockers)
 
 
-def greenhouse_oracle(grid: OccupancyGrid, viewpoints, max_range: float = 2.0, first_tries: int = 16,
+def greenhouse_oracle(grid: OccupancyGrid, viewpoints, max_range: float = ROW_RANGE, first_tries: int = 16,
                       chunk_size: int = 20000, progress: bool | None = None, return_rays: bool = False):
     """Sorted ids of the countable voxels visible from any viewpoint (FOV-free, see module doc).
 
