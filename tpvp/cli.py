@@ -51,11 +51,21 @@ def _print_case(result, summary, folder, compile_seconds):
             ("time: warm-up / registration", f"{result.timings['warm_up']:.2f} s / {result.timings['registration']:.2f} s"),
             ("time: planning (inflation..path)", f"{result.timings['planning']:.2f} s"),
             ("time: numba compile / cache load", f"{compile_seconds:.2f} s (not part of the run)")]
+    _print_rows(rows, folder, "results, plan.csv in the scan frame, plan_normalised.csv, plan.json, config.yaml, "
+                              "provenance.json, plan.png, coverage.png, recording.rrd")
+
+
+def _print_rows(rows, folder, files: str) -> None:
+    """A case's figures as aligned ``name  value`` lines, then what was written where."""
     width = max(len(k) for k, _ in rows)
     for key, value in rows:
         print(f"  {key:<{width}}  {value}")
-    print(f"wrote {folder}/ (results, plan.csv in the scan frame, plan_normalised.csv, "
-          f"plan.json, config.yaml, provenance.json, plan.png, coverage.png, recording.rrd)")
+    print(f"wrote {folder}/ ({files})")
+
+
+def _print_warnings(warnings) -> None:
+    for warning in warnings:
+        print(f"warning: {warning}", file=sys.stderr)
 
 
 def _config(args):
@@ -122,8 +132,7 @@ def _run_pair(previous, current, output, config, name="case", inputs=(), names=N
             print(f"note: the {which} scan's {reduction[f'{which}_points']:,} points were reduced to "
                   f"{reduction[f'{which}_points_used']:,} voxel centroids at "
                   f"{1e3 * reduction['resolution_m']:g} mm (planning frame) before planning")
-    for warning in result.warnings:
-        print(f"warning: {warning}", file=sys.stderr)
+    _print_warnings(result.warnings)
     return 0
 
 
@@ -253,13 +262,9 @@ def _greenhouse(args) -> int:
                                f"optimal={result.selection.optimal}"),
             ("time: oracle", f"{scene.timings['oracle']:.1f} s" + (" (from the cache)" if scene.oracle_cached else "")),
             ("time: registration / planning", f"{result.timings['registration']:.2f} s / {result.timings['planning']:.2f} s")]
-    width = max(len(k) for k, _ in rows)
-    for key, value in rows:
-        print(f"  {key:<{width}}  {value}")
-    print(f"wrote {stage.destination}/ (results.json/.csv, plan.csv, plan.json, config.yaml, provenance.json, "
-          f"plan.png, recording.rrd)")
-    for warning in result.warnings:
-        print(f"warning: {warning}", file=sys.stderr)
+    _print_rows(rows, stage.destination, "results.json/.csv, plan.csv, plan.json, config.yaml, provenance.json, "
+                                         "plan.png, recording.rrd")
+    _print_warnings(result.warnings)
     return 0
 
 
