@@ -284,19 +284,27 @@ def _experiments_rows(args) -> int:
     return 0
 
 
-def _row_options(p, output):
-    p.add_argument("--output", default=output, help="output folder (default: %(default)s)")
-    p.add_argument("--config", default="paper-row", metavar="NAME|FILE",
-                   help="named configuration (paper-row) or a YAML file (default: %(default)s)")
+def _configuration_options(p, output, named: str = "paper"):
+    """--output, --config, --set and --coverage-target: the same for plants and rows."""
+    if output is not None:
+        p.add_argument("--output", default=output, help="output folder (default: %(default)s)")
+    p.add_argument("--config", default=named, metavar="NAME|FILE",
+                   help=f"named configuration ({named}) or a YAML file, e.g. a run's config.yaml (default: %(default)s)")
+    listed = "tpvp config --derived" if named == "paper" else f"tpvp config --config {named} --derived"
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                   help="override one configuration key (repeatable; `tpvp config --config paper-row --derived`)")
+                   help=f"override one configuration key, e.g. --set registration.embedded_deformation.iterations=100 "
+                        f"(repeatable; `{listed}` lists the keys)")
+    p.add_argument("--coverage-target", default=None, type=float, metavar="FRACTION", help=COVERAGE_TARGET_HELP)
+
+
+def _row_options(p, output):
+    _configuration_options(p, output, "paper-row")
     p.add_argument("--dataset", type=Path, default=None,
                    help="a folder written by `python -m data_tools greenhouse clean` (Processed_3D_Model/"
                         "<room>_<date>.pcd; default: generated rows, offline)")
     p.add_argument("--cover-resolution", type=float, default=None, metavar="M",
                    help="covering voxel of the set cover (paper: 0.10, 0.05, 0.04, 0.03; default: the "
                         "configuration's, 0.04)")
-    p.add_argument("--coverage-target", type=float, default=None, metavar="FRACTION", help=COVERAGE_TARGET_HELP)
     p.add_argument("--quick", action="store_true",
                    help="coarse ground truth (2 cm), fewer covering voxels, budgets and draws, for a fast look")
 
@@ -315,14 +323,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
 
     def common(p, output, case_options=True):
-        if output is not None:
-            p.add_argument("--output", default=output, help="output folder (default: %(default)s)")
-        p.add_argument("--config", default="paper", metavar="NAME|FILE",
-                       help="named configuration (paper) or a YAML file, e.g. a run's config.yaml (default: %(default)s)")
-        p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                       help="override one configuration key, e.g. --set registration.embedded_deformation.iterations=100 "
-                            "(repeatable; `tpvp config --derived` lists the keys)")
-        p.add_argument("--coverage-target", default=None, type=float, metavar="FRACTION", help=COVERAGE_TARGET_HELP)
+        _configuration_options(p, output)
         if not case_options:
             return
         p.add_argument("--frontier", action="store_true",

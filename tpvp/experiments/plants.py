@@ -242,16 +242,16 @@ def _one_shot(name: str):
     return method
 
 
-PLANT_METHODS.register("ours", "the paper's method: warm-up NBV, registration, inflation, set cover, TSP")(
-    _one_shot("ours"))
-PLANT_METHODS.register("ours-no-inflation", "planning on the aligned previous session only (Table III)")(
-    _one_shot("ours-no-inflation"))
-PLANT_METHODS.register("initial-view-only", "registration on the initial view, no warm-up NBV (Table IV)")(
-    _one_shot("initial-view-only"))
-PLANT_METHODS.register("initial-view-only-no-inflation", "initial view only, without inflation")(
-    _one_shot("initial-view-only-no-inflation"))
-PLANT_METHODS.register("one-shot-no-prior", "set cover + TSP on the coarse reconstruction alone (no previous session)")(
-    _one_shot("one-shot-no-prior"))
+ONE_SHOT_HELP = {
+    "ours": "the paper's method: warm-up NBV, registration, inflation, set cover, TSP",
+    "ours-no-inflation": "planning on the aligned previous session only (Table III)",
+    "initial-view-only": "registration on the initial view, no warm-up NBV (Table IV)",
+    "initial-view-only-no-inflation": "initial view only, without inflation",
+    "one-shot-no-prior": "set cover + TSP on the coarse reconstruction alone (no previous session)",
+    "ours-pc-nbv": "the paper's method with the learned PC-NBV warm-up view",
+}
+for _name, _help in ONE_SHOT_HELP.items():
+    PLANT_METHODS.register(_name, _help)(_one_shot(_name))
 
 
 @PLANT_METHODS.register("gmc", "GMC-style sequential NBV from the initial view; the whole 1..20 curve")
@@ -289,8 +289,6 @@ PLANT_METHODS.register("ma-scvp", "MA-SCVP-style learned view set after one PC-N
     _learned("network"))
 PLANT_METHODS.register("ma-scvp-oracle", "MA-SCVP's pipeline with the exact set cover it is trained to predict")(
     _learned("oracle"))
-PLANT_METHODS.register("ours-pc-nbv", "the paper's method with the learned PC-NBV warm-up view")(
-    _one_shot("ours-pc-nbv"))
 
 
 # --------------------------------------------------------------------------------------------------

@@ -252,13 +252,18 @@ def _main_azimuth(rng, params: PlantParams) -> float:
     return params.azimuth_deg * _DEG + jitter
 
 
+def _new_spec(species: str, seed: int, params: PlantParams):
+    """The species' random stream (seeded by the plant's seed) and a spec with its age drawn first."""
+    rng = np.random.default_rng([seed, _SPECIES_CODE[species]])
+    sp = _Spec()
+    sp.age1 = _BASE_AGE[species] + rng.uniform(*(params.development or _DEFAULT_DEVELOPMENT[species]))
+    return rng, sp
+
+
 def _tomato_spec(seed: int, params: PlantParams) -> _Spec:
-    rng = np.random.default_rng([seed, _SPECIES_CODE["tomato"]])
+    rng, sp = _new_spec("tomato", seed, params)
     u = rng.uniform
     n = _MAX_LEAVES
-    dev = params.development or _DEFAULT_DEVELOPMENT["tomato"]
-    sp = _Spec()
-    sp.age1 = _BASE_AGE["tomato"] + u(*dev)
     # stem (hypocotyl, then one epicotyl internode under each true leaf)
     post = _TOMATO_POSTURE
     sp.hyp_len = u(*post["hypocotyl"])
@@ -410,12 +415,9 @@ def _tomato_parts(sp: _Spec, age: float, motion: float, size: float) -> list[Par
 
 
 def _maize_spec(seed: int, params: PlantParams) -> _Spec:
-    rng = np.random.default_rng([seed, _SPECIES_CODE["maize"]])
+    rng, sp = _new_spec("maize", seed, params)
     u = rng.uniform
     n = _MAX_LEAVES
-    dev = params.development or _DEFAULT_DEVELOPMENT["maize"]
-    sp = _Spec()
-    sp.age1 = _BASE_AGE["maize"] + u(*dev)
     idx = np.arange(n)
     sp.leaf_T = 5.5 + 0.8 * idx
     sp.leaf_e = np.concatenate([[0.0], np.cumsum(u(2.2, 3.0, n - 1))])
