@@ -309,7 +309,8 @@ def case_scene(case: Case, case_config: PlantConfig, cache_dir=None):
 
 
 PLANT_EXPERIMENTS = Experiment("plant experiments", PLANT_METHODS, case_scene,
-                               order=("view_space", "instance", "rotation_deg", "initial_view", "method"))
+                               order=("view_space", "instance", "rotation_deg", "initial_view", "method"),
+                               reference=f"{__name__}:PLANT_EXPERIMENTS")
 
 
 def task_key(case: Case, method: str, config: PlantConfig) -> str:

@@ -250,7 +250,7 @@ def scene_columns(scene) -> dict:
 
 # The case's oracle is cached beside the rows (cache_dir/oracle) or in the default cache folder.
 ROW_EXPERIMENTS = Experiment("row experiments", ROW_METHODS, _scene, order=("room", "previous_session", "method"),
-                             scene_columns=scene_columns)
+                             scene_columns=scene_columns, reference=f"{__name__}:ROW_EXPERIMENTS")
 
 
 def task_key(case: RowCase, method: str, config: RowConfig) -> str:

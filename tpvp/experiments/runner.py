@@ -11,6 +11,7 @@ columns every row gets from the scene and the order of the raw table.
 from __future__ import annotations
 
 import hashlib
+import importlib
 import json
 import time
 from dataclasses import asdict, dataclass
@@ -43,6 +44,19 @@ class Experiment:
     scene: Callable
     order: tuple
     scene_columns: Callable | None = None
+    reference: str = ""  # "module:attribute" where it is defined: worker processes import it from there
+
+    def __reduce__(self):
+        # The registry holds closures that cannot be pickled; a worker finds the experiment by name.
+        if not self.reference:
+            raise ValueError(f"{self.name}: an Experiment sent to worker processes needs its reference")
+        return experiment_at, (self.reference,)
+
+
+def experiment_at(reference: str) -> Experiment:
+    """The :class:`Experiment` at ``"module:attribute"``."""
+    module, _, attribute = reference.partition(":")
+    return getattr(importlib.import_module(module), attribute)
 
 
 def task_key(case, method: str, config) -> str:
