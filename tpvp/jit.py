@@ -18,6 +18,14 @@ import time
 
 import numpy as np
 
+from tpvp.nbv import OccupancyMap, information_gain, next_best_view
+from tpvp.path.tsp import TspConfig, shortest_open_path
+from tpvp.registration.embedded_deformation import compile_kernels as compile_registration
+from tpvp.scene.grid import build_grid
+from tpvp.sensor.sensor import SensorConfig, depth_image, observe, observe_many
+from tpvp.visibility import visibility_matrix
+from tpvp.visibility.oracle import greenhouse_oracle
+
 
 def compile_kernels(greenhouse: bool = False) -> float:
     """Trigger compilation or cache loading of the pipeline's numba kernels; returns the seconds.
@@ -28,13 +36,6 @@ def compile_kernels(greenhouse: bool = False) -> float:
     search, and the embedded-deformation registration's loss/gradient and nearest-neighbour kernels.
     ``greenhouse`` adds the greenhouse-row oracle (not used for single plants).
     """
-    from tpvp.nbv import OccupancyMap, information_gain, next_best_view
-    from tpvp.path.tsp import TspConfig, shortest_open_path
-    from tpvp.scene.grid import build_grid
-    from tpvp.sensor.sensor import SensorConfig, depth_image, observe, observe_many
-    from tpvp.visibility import visibility_matrix
-    from tpvp.visibility.oracle import greenhouse_oracle
-
     start = time.perf_counter()
     res = 0.01
     # A 4 x 4 x 4 voxel block (countable) on a 6 x 6 slab (occludes only), around the origin.
@@ -61,7 +62,6 @@ def compile_kernels(greenhouse: bool = False) -> float:
 
     distance = np.abs(np.subtract.outer(np.arange(6.0), np.arange(6.0)))
     shortest_open_path(distance, 0, config=TspConfig(method="heuristic", kicks=1))
-    from tpvp.registration.embedded_deformation import compile_kernels as compile_registration
 
     compile_registration()
     if greenhouse:
