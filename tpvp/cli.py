@@ -17,7 +17,7 @@ STAGES = ["compile", "scene", "warm-up NBV", "registration", "inflation", "visib
           "path", "outputs"]
 
 
-def _print_case(result, summary, folder, compile_seconds):
+def _print_case(result, summary, folder, compile_seconds, pieces):
     rows = [("views (warm-up included)", f"{result.n_views}"),
             ("coverage of the oracle set", f"{100 * result.coverage:.2f} %"),
             ("path length", f"{result.path_length:.2f} m (planning frame; "
@@ -29,7 +29,8 @@ def _print_case(result, summary, folder, compile_seconds):
                 if hasattr(result.set_cover, "n_dropped_infeasible") else f"; {result.selection.status}")),
             ("time: warm-up / registration", f"{result.timings['warm_up']:.2f} s / {result.timings['registration']:.2f} s"),
             ("time: planning (inflation..path)", f"{result.timings['planning']:.2f} s"),
-            ("time: numba compile / cache load", f"{compile_seconds:.2f} s (not part of the run)")]
+            ("time: numba compile / cache load", f"{compile_seconds:.2f} s (kernels: {', '.join(pieces)}; "
+                                                 "not part of the run)")]
     width = max(len(k) for k, _ in rows)
     for key, value in rows:
         print(f"  {key:<{width}}  {value}")
@@ -74,7 +75,7 @@ def _run_pair(previous, current, output, config, name="case", inputs=(), names=N
     from tpvp.experiments.outputs import write_case_outputs
     from tpvp.experiments.single_plant import build_scene, run_case, transfer
     from tpvp.io.publish import staged_folder
-    from tpvp.jit import compile_kernels
+    from tpvp.jit import compile_kernels, plant_pieces
 
     frontier_table = None
     with staged_folder(output, inputs=inputs) as stage, \
@@ -84,7 +85,8 @@ def _run_pair(previous, current, output, config, name="case", inputs=(), names=N
             bar.set_postfix_str(stage_name)
 
         bar.set_postfix_str("compile")
-        compile_seconds = compile_kernels()
+        pieces = plant_pieces(config)
+        compile_seconds = compile_kernels(*pieces)
         step("scene")
         scene = build_scene(previous, current, config, **({"names": names} if names else {}))
         shared = transfer(scene, config, progress=step)  # warm-up + registration, reused by the frontier
@@ -100,7 +102,7 @@ def _run_pair(previous, current, output, config, name="case", inputs=(), names=N
             bar.set_postfix_str("frontier")
             frontier_table = coverage_frontier(scene, config, transferred=shared)
             write_frontier_files(stage.folder, frontier_table, name)
-    _print_case(result, summary, stage.destination, compile_seconds)
+    _print_case(result, summary, stage.destination, compile_seconds, pieces)
     if frontier_table is not None:
         _print_frontier(frontier_table)
         print("  (also frontier.csv, frontier.png)")
