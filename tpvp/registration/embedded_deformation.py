@@ -52,7 +52,7 @@ Deviations (fixes):
   shared 2-core machine (``benchmarks/registration_bench.py``); ~3/4 of it is the iterations, of
   which the nearest-neighbour searches are ~60 %. The Laplacian is still evaluated every
   iteration (~40 % of one), since it enters the recorded losses and the stop test. The kernels
-  are compiled once per machine and source version (numba cache, ~4 s) and loaded in ~0.05 s
+  are compiled once per machine and source version (numba cache, ~3.5 s) and loaded in ~0.05 s
   by a process's first call (:func:`compile_kernels` does that up front);
 * float64 throughout (reference float32); inputs are checked (empty, NaN, units, overlap);
 * if every anchor weight of a point underflows (impossible at the default settings) the point
@@ -785,7 +785,7 @@ def compile_kernels() -> float:
     """Compile the numba kernels (or load them from numba's on-disk cache) with a 2-iteration
     registration of a tiny pair, through the same code path and argument types as real calls;
     returns the seconds. A run timed after it measures the registration, not the compilation
-    (first run on a machine: ~4 s on a quiet 2-core machine; cache load: ~0.05 s)."""
+    (first run on a machine: ~3.5 s on a quiet 2-core machine; cache load: ~0.05 s)."""
     start = time.perf_counter()
     rng = np.random.default_rng(0)
     P = rng.uniform(0.0, 0.02, size=(60, 3))
