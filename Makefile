@@ -63,6 +63,7 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/blockwise_nbv_bench.py
 	$(BIN)/python benchmarks/learned_inference_bench.py
 	$(BIN)/python benchmarks/import_graph.py
+	$(BIN)/python benchmarks/first_run.py
 
 # Every notebook in full mode (the paper's protocol): executed .ipynb + HTML + the exported figures and
 # tables under $(OUT)/notebooks, published whole; make test runs them in reader's mode.

@@ -23,7 +23,7 @@ from tpvp.experiments.rows import QUICK, RowCase, dataset_cases
 from tpvp.experiments.single_plant import build_scene, run_case, transfer
 from tpvp.io import atomic_write_text, read_point_cloud
 from tpvp.io.publish import staged_folder
-from tpvp.jit import compile_kernels
+from tpvp.jit import compile_kernels, plant_pieces
 from tpvp.scene.boxes import ROOMS
 from tpvp.scene.samples import load_sample
 from tpvp.viewspace import get_view_space, view_space_choices
@@ -38,7 +38,7 @@ STAGES = ["compile", "scene", "warm-up NBV", "registration", "inflation", "visib
           "path", "outputs"]
 
 
-def _print_case(result, summary, folder, compile_seconds):
+def _print_case(result, summary, folder, compile_seconds, pieces):
     rows = [("views (warm-up included)", f"{result.n_views}"),
             ("coverage of the oracle set", f"{100 * result.coverage:.2f} %"),
             ("path length", f"{result.path_length:.2f} m (planning frame; "
@@ -50,7 +50,8 @@ def _print_case(result, summary, folder, compile_seconds):
                 if hasattr(result.set_cover, "n_dropped_infeasible") else f"; {result.selection.status}")),
             ("time: warm-up / registration", f"{result.timings['warm_up']:.2f} s / {result.timings['registration']:.2f} s"),
             ("time: planning (inflation..path)", f"{result.timings['planning']:.2f} s"),
-            ("time: numba compile / cache load", f"{compile_seconds:.2f} s (not part of the run)")]
+            ("time: numba compile / cache load", f"{compile_seconds:.2f} s (kernels: {', '.join(pieces)}; "
+                                                 "not part of the run)")]
     _print_rows(rows, folder, "results, plan.csv in the scan frame, plan_normalised.csv, plan.json, config.yaml, "
                               "provenance.json, plan.png, coverage.png, recording.rrd")
 
@@ -108,7 +109,8 @@ def _run_pair(previous, current, output, config, name="case", inputs=(), names=N
             bar.set_postfix_str(stage_name)
 
         bar.set_postfix_str("compile")
-        compile_seconds = compile_kernels()
+        pieces = plant_pieces(config)
+        compile_seconds = compile_kernels(*pieces)
         step("scene")
         scene = build_scene(previous, current, config, **({"names": names} if names else {}))
         shared = transfer(scene, config, progress=step)  # warm-up + registration, reused by the frontier
@@ -122,7 +124,7 @@ def _run_pair(previous, current, output, config, name="case", inputs=(), names=N
             bar.set_postfix_str("frontier")
             frontier_table = coverage_frontier(scene, config, transferred=shared)
             write_frontier_files(stage.folder, frontier_table, name)
-    _print_case(result, summary, stage.destination, compile_seconds)
+    _print_case(result, summary, stage.destination, compile_seconds, pieces)
     if frontier_table is not None:
         _print_frontier(frontier_table)
         print("  (also frontier.csv, frontier.png)")

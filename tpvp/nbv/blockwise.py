@@ -70,6 +70,8 @@ view's pixel rays up to their first own return or the maximum range (a depth cam
 it saw nothing; the authors' OctoMap carves only along rays to returns). Free never overrides
 occupied (no probabilistic log-odds as in OctoMap). Truth voxels outside the plant box are not
 mapped. Rays use the exact DDA of :mod:`tpvp.sensor.raycast` through :func:`tpvp.nbv.occupancy.walk`.
+The gain and frontier kernels keep ``parallel=True``: only greenhouse rows compile them, and it pays
+(the plan part of an iteration 0.011 s against 0.020 s on one thread, 2 cores).
 """
 
 from __future__ import annotations
@@ -83,7 +85,9 @@ from numba import njit, prange
 from tqdm.auto import tqdm
 
 from tpvp.errors import ConfigError
-from tpvp.nbv.occupancy import FREE, MODE_CARVE, MODE_FREESPACE, MODE_GAIN, OCCUPIED, UNKNOWN, pixel_ray, walk
+from tpvp.nbv.occupancy import (FALSE, FREE, MODE_CARVE, MODE_FREESPACE, MODE_GAIN, OCCUPIED, TRUE, UNKNOWN, ZERO,
+                                pixel_ray, walk)
+from tpvp.numba_tools import JIT
 from tpvp.scene.boxes import OrientedBox, RoomConfig, room_config
 from tpvp.scene.grid import OccupancyGrid
 from tpvp.sensor.camera import look_at_rotation
@@ -126,7 +130,7 @@ class BlockwiseNbvConfig:
 
 
 # ----------------------------------------------------------------------------- kernels
-@njit(cache=True, parallel=True)
+@njit(**JIT, parallel=True)
 def _gains(origins, rots, fx, fy, cx, cy, width, height, stride, max_range, state, res, stamps, tag0,
            out):
     """Distinct unknown voxels visited by the pixel rays of each view (map frame, origin key 0).
@@ -149,12 +153,12 @@ def _gains(origins, rots, fx, fy, cx, cy, width, height, stride, max_range, stat
                 yn = (np.float64(r * stride) - cy) / fy
                 for c in range(ncols):
                     dx, dy, dz, t_stop = pixel_ray(rot, c, stride, yn, cx, fx, max_range)
-                    count += walk(ox, oy, oz, dx, dy, dz, t_stop, state, 0, 0, 0, res, MODE_GAIN, True,
-                                  0, 0, 0, stamp, tag, no_keys)
+                    count += walk(ox, oy, oz, dx, dy, dz, t_stop, state, ZERO, ZERO, ZERO, res, MODE_GAIN,
+                                  TRUE, ZERO, ZERO, ZERO, stamp, tag, no_keys)
             out[v] = count
 
 
-@njit(cache=True)
+@njit(**JIT)
 def _integrate(origin, rot, keys, fx, fy, cx, cy, width, height, stride, max_range, state, res, own,
                tag, carve_pixels):
     """One view into the map (map frame): ``keys`` (n, 3) in-map voxels of its returns."""
@@ -168,7 +172,7 @@ def _integrate(origin, rot, keys, fx, fy, cx, cy, width, height, stride, max_ran
     for i in range(keys.shape[0]):
         a, b, c = keys[i, 0], keys[i, 1], keys[i, 2]
         walk(ox, oy, oz, (a + 0.5) * res - ox, (b + 0.5) * res - oy, (c + 0.5) * res - oz, 1.0, state,
-             0, 0, 0, res, MODE_CARVE, False, a, b, c, own, tag, no_keys)
+             ZERO, ZERO, ZERO, res, MODE_CARVE, FALSE, a, b, c, own, tag, no_keys)
     if carve_pixels:
         ncols = (width + stride - 1) // stride
         nrows = (height + stride - 1) // stride
@@ -176,11 +180,11 @@ def _integrate(origin, rot, keys, fx, fy, cx, cy, width, height, stride, max_ran
             yn = (np.float64(r * stride) - cy) / fy
             for cc in range(ncols):
                 dx, dy, dz, t_stop = pixel_ray(rot, cc, stride, yn, cx, fx, max_range)
-                walk(ox, oy, oz, dx, dy, dz, t_stop, state, 0, 0, 0, res, MODE_FREESPACE, True, 0, 0, 0,
-                     own, tag, no_keys)
+                walk(ox, oy, oz, dx, dy, dz, t_stop, state, ZERO, ZERO, ZERO, res, MODE_FREESPACE, TRUE, ZERO,
+                     ZERO, ZERO, own, tag, no_keys)
 
 
-@njit(cache=True, parallel=True)
+@njit(**JIT, parallel=True)
 def _frontier_kinds(state, out):
     """Per voxel: 2 = surface frontier (unknown, a free and an occupied voxel among its 26
     neighbours), 1 = exploration frontier (unknown, a free neighbour, no occupied one), else 0."""

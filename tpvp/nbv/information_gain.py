@@ -29,12 +29,13 @@ from __future__ import annotations
 
 import math
 
-import numba
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 from tpvp.errors import ConfigError
-from tpvp.nbv.occupancy import MODE_GAIN, MODE_VISIBILITY, OCCUPIED, UNKNOWN, OccupancyMap, pixel_ray, walk
+from tpvp.nbv.occupancy import (MODE_GAIN, MODE_VISIBILITY, OCCUPIED, TRUE, UNKNOWN, ZERO, OccupancyMap, pixel_ray,
+                                walk)
+from tpvp.numba_tools import JIT, run_workers
 from tpvp.sensor.camera import D435, Intrinsics, look_at_rotations
 
 # A voxel closer than this to the camera plane (m, along the optical axis) may be on any pixel ray;
@@ -45,7 +46,7 @@ _BEHIND = 1e-9
 _MARGIN = 0.01
 
 
-@njit(cache=True, inline="always")
+@njit(**JIT)
 def _axis_span(a, k0, s, o, inv, res):
     """``(ok, t_in, t_out)``: the events along one axis that bring the ray's index to ``a`` and take
     it away (``-inf`` / ``inf`` when it holds ``a`` from the start / for ever; ``ok`` False when it
@@ -65,7 +66,7 @@ def _axis_span(a, k0, s, o, inv, res):
     return True, -np.inf, np.inf
 
 
-@njit(cache=True, inline="always")
+@njit(**JIT)
 def _entry(a, b, c, k0x, k0y, k0z, ox, oy, oz, sx, sy, sz, inv_x, inv_y, inv_z, t_stop, res):
     """``(visited, t, axis)``: whether the ray visits voxel ``(a, b, c)`` and its entry event."""
     okx, tix, tox = _axis_span(a, k0x, sx, ox, inv_x, res)
@@ -92,7 +93,7 @@ def _entry(a, b, c, k0x, k0y, k0z, ox, oy, oz, sx, sy, sz, inv_x, inv_y, inv_z, 
     return visited, t_in, ax_in
 
 
-@njit(cache=True, inline="always")
+@njit(**JIT)
 def _footprint(a, b, c, res, ox, oy, oz, rot, fx, fy, cx, cy, stride, r0, r1, c0, c1):
     """Rows and columns ``(ra, rb, ca, cb)`` (inclusive, clipped to ``[r0, r1] x [c0, c1]``) of the
     pixel rays that may pass through voxel ``(a, b, c)``, the ray ``(rm, cm)`` nearest its centre,
@@ -129,108 +130,139 @@ def _footprint(a, b, c, res, ox, oy, oz, rot, fx, fy, cx, cy, stride, r0, r1, c0
     return ra, rb, ca, cb, rm, cm, near
 
 
-@njit(cache=True, parallel=True)
+@njit(**JIT)
+def _argsort(values):
+    """Indices that sort ``values`` ascending, ties in any order (a heapsort: np.argsort would cost
+    numba a second more to compile)."""
+    n = values.shape[0]
+    order = np.empty(n, dtype=np.int64)
+    for i in range(n):
+        order[i] = i
+    for start in range(n // 2 - 1, -1, -1):
+        _sift_down(values, order, start, n)
+    for end in range(n - 1, 0, -1):
+        order[0], order[end] = order[end], order[0]
+        _sift_down(values, order, ZERO, end)  # ZERO: the signature of the call above (a literal 0 is another)
+    return order
+
+
+@njit(**JIT)
+def _sift_down(values, order, root, end):
+    """Restore the max-heap ``order[root:end]`` (by ``values``) below ``root``."""
+    while True:
+        child = 2 * root + 1
+        if child >= end:
+            return
+        if child + 1 < end and values[order[child + 1]] > values[order[child]]:
+            child += 1
+        if values[order[root]] >= values[order[child]]:
+            return
+        order[root], order[child] = order[child], order[root]
+        root = child
+
+
+@njit(**JIT, nogil=True)
 def _gains_by_voxel(positions, rotations, windows, fx, fy, cx, cy, stride, max_range, occupied,
-                    unknown, res, nthreads, out):
+                    unknown, res, out, worker, workers):
     """Counts of the views (their pixel-ray windows ``[r0, r1, c0, c1]``, see :func:`_window`):
     see the module docstring. ``occupied`` / ``unknown``: keys ``(n, 3)`` of the map's voxels in
-    those states."""
+    those states. Views ``worker, worker + workers, ...`` (:func:`tpvp.numba_tools.run_workers`;
+    neighbouring views cost alike)."""
     nviews = positions.shape[0]
     size = 1
     for v in range(nviews):
         w = windows[v]
         size = max(size, (w[1] - w[0] + 1) * (w[3] - w[2] + 1))
-    # One worker per thread, views interleaved over the workers (neighbouring views cost alike).
-    for worker in prange(nthreads):
-        inv = np.empty((size, 3))
-        sgn = np.empty((size, 3), dtype=np.int64)
-        t_stop = np.empty(size)
-        hit_t = np.empty(size)
-        hit_a = np.empty(size, dtype=np.int64)
-        for v in range(worker, nviews, nthreads):
-            r0, r1, c0, c1 = windows[v, 0], windows[v, 1], windows[v, 2], windows[v, 3]
-            if r0 > r1 or c0 > c1:
-                out[v] = 0
-                continue
-            width = c1 - c0 + 1
-            ox, oy, oz = positions[v, 0], positions[v, 1], positions[v, 2]
-            rot = rotations[v]
-            k0x = np.int64(np.floor(ox / res))  # as tpvp.sensor.raycast.ray_setup
-            k0y = np.int64(np.floor(oy / res))
-            k0z = np.int64(np.floor(oz / res))
-            for r in range(r0, r1 + 1):
-                yn = (np.float64(r * stride) - cy) / fy
-                for c in range(c0, c1 + 1):
-                    j = (r - r0) * width + (c - c0)
-                    dx, dy, dz, ts = pixel_ray(rot, c, stride, yn, cx, fx, max_range)
-                    t_stop[j] = ts
-                    for axis, d in ((0, dx), (1, dy), (2, dz)):
-                        sgn[j, axis] = 1 if d > 0 else (-1 if d < 0 else 0)
-                        inv[j, axis] = 1.0 / d if d != 0 else 0.0
-                    hit_t[j] = np.inf
-                    hit_a[j] = 3
-            # Each ray's stop: the earliest entry into an occupied voxel. Nearest voxels first, so
-            # that farther ones are mostly passed over by the bound below (the order is free).
-            dist = np.empty(occupied.shape[0])
-            for n in range(occupied.shape[0]):
-                ex = (occupied[n, 0] + 0.5) * res - ox
-                ey = (occupied[n, 1] + 0.5) * res - oy
-                ez = (occupied[n, 2] + 0.5) * res - oz
-                dist[n] = ex * ex + ey * ey + ez * ez
-            for n in np.argsort(dist):
-                a, b, c = occupied[n, 0], occupied[n, 1], occupied[n, 2]
-                ra, rb, ca, cb, _, _, near = _footprint(a, b, c, res, ox, oy, oz, rot, fx, fy, cx,
-                                                        cy, stride, r0, r1, c0, c1)
-                for r in range(ra, rb + 1):
-                    for cc in range(ca, cb + 1):
-                        j = (r - r0) * width + (cc - c0)
-                        if hit_t[j] < near or t_stop[j] < near:
-                            continue  # it stops before reaching this voxel
-                        seen, t, ax = _entry(a, b, c, k0x, k0y, k0z, ox, oy, oz, sgn[j, 0],
-                                             sgn[j, 1], sgn[j, 2], inv[j, 0], inv[j, 1], inv[j, 2],
-                                             t_stop[j], res)
-                        if seen and (t < hit_t[j] or (t == hit_t[j] and ax < hit_a[j])):
-                            hit_t[j] = t
-                            hit_a[j] = ax
-            # An unknown voxel counts when a ray visits it before its stop.
-            count = 0
-            for n in range(unknown.shape[0]):
-                a, b, c = unknown[n, 0], unknown[n, 1], unknown[n, 2]
-                ra, rb, ca, cb, rm, cm, near = _footprint(a, b, c, res, ox, oy, oz, rot, fx, fy,
-                                                          cx, cy, stride, r0, r1, c0, c1)
-                if ra > rb or ca > cb:
-                    continue
-                found = False
-                for k in range(-1, (rb - ra + 1) * (cb - ca + 1)):
-                    if k < 0:
-                        r, cc = rm, cm  # the central ray first: it settles most voxels
-                    else:
-                        r, cc = ra + k // (cb - ca + 1), ca + k % (cb - ca + 1)
-                        if r == rm and cc == cm:
-                            continue
+    inv = np.empty((size, 3))
+    sgn = np.empty((size, 3), dtype=np.int64)
+    t_stop = np.empty(size)
+    hit_t = np.empty(size)
+    hit_a = np.empty(size, dtype=np.int64)
+    for v in range(worker, nviews, workers):
+        r0, r1, c0, c1 = windows[v, 0], windows[v, 1], windows[v, 2], windows[v, 3]
+        if r0 > r1 or c0 > c1:
+            out[v] = 0
+            continue
+        width = c1 - c0 + 1
+        ox, oy, oz = positions[v, 0], positions[v, 1], positions[v, 2]
+        rot = rotations[v]
+        k0x = np.int64(np.floor(ox / res))  # as tpvp.sensor.raycast.ray_setup
+        k0y = np.int64(np.floor(oy / res))
+        k0z = np.int64(np.floor(oz / res))
+        for r in range(r0, r1 + 1):
+            yn = (np.float64(r * stride) - cy) / fy
+            for c in range(c0, c1 + 1):
+                j = (r - r0) * width + (c - c0)
+                dx, dy, dz, ts = pixel_ray(rot, c, stride, yn, cx, fx, max_range)
+                t_stop[j] = ts
+                for axis, d in ((0, dx), (1, dy), (2, dz)):
+                    sgn[j, axis] = 1 if d > 0 else (-1 if d < 0 else 0)
+                    inv[j, axis] = 1.0 / d if d != 0 else 0.0
+                hit_t[j] = np.inf
+                hit_a[j] = 3
+        # Each ray's stop: the earliest entry into an occupied voxel. Nearest voxels first, so
+        # that farther ones are mostly passed over by the bound below (the order is free).
+        dist = np.empty(occupied.shape[0])
+        for n in range(occupied.shape[0]):
+            ex = (occupied[n, 0] + 0.5) * res - ox
+            ey = (occupied[n, 1] + 0.5) * res - oy
+            ez = (occupied[n, 2] + 0.5) * res - oz
+            dist[n] = ex * ex + ey * ey + ez * ez
+        for n in _argsort(dist):
+            a, b, c = occupied[n, 0], occupied[n, 1], occupied[n, 2]
+            ra, rb, ca, cb, _, _, near = _footprint(a, b, c, res, ox, oy, oz, rot, fx, fy, cx,
+                                                    cy, stride, r0, r1, c0, c1)
+            for r in range(ra, rb + 1):
+                for cc in range(ca, cb + 1):
                     j = (r - r0) * width + (cc - c0)
                     if hit_t[j] < near or t_stop[j] < near:
                         continue  # it stops before reaching this voxel
-                    seen, t, ax = _entry(a, b, c, k0x, k0y, k0z, ox, oy, oz, sgn[j, 0], sgn[j, 1],
-                                         sgn[j, 2], inv[j, 0], inv[j, 1], inv[j, 2], t_stop[j], res)
+                    seen, t, ax = _entry(a, b, c, k0x, k0y, k0z, ox, oy, oz, sgn[j, 0],
+                                         sgn[j, 1], sgn[j, 2], inv[j, 0], inv[j, 1], inv[j, 2],
+                                         t_stop[j], res)
                     if seen and (t < hit_t[j] or (t == hit_t[j] and ax < hit_a[j])):
-                        found = True
-                        break
-                if found:
-                    count += 1
-            out[v] = count
+                        hit_t[j] = t
+                        hit_a[j] = ax
+        # An unknown voxel counts when a ray visits it before its stop.
+        count = 0
+        for n in range(unknown.shape[0]):
+            a, b, c = unknown[n, 0], unknown[n, 1], unknown[n, 2]
+            ra, rb, ca, cb, rm, cm, near = _footprint(a, b, c, res, ox, oy, oz, rot, fx, fy,
+                                                      cx, cy, stride, r0, r1, c0, c1)
+            if ra > rb or ca > cb:
+                continue
+            found = False
+            for k in range(-1, (rb - ra + 1) * (cb - ca + 1)):
+                if k < 0:
+                    r, cc = rm, cm  # the central ray first: it settles most voxels
+                else:
+                    r, cc = ra + k // (cb - ca + 1), ca + k % (cb - ca + 1)
+                    if r == rm and cc == cm:
+                        continue
+                j = (r - r0) * width + (cc - c0)
+                if hit_t[j] < near or t_stop[j] < near:
+                    continue  # it stops before reaching this voxel
+                seen, t, ax = _entry(a, b, c, k0x, k0y, k0z, ox, oy, oz, sgn[j, 0], sgn[j, 1],
+                                     sgn[j, 2], inv[j, 0], inv[j, 1], inv[j, 2], t_stop[j], res)
+                if seen and (t < hit_t[j] or (t == hit_t[j] and ax < hit_a[j])):
+                    found = True
+                    break
+            if found:
+                count += 1
+        out[v] = count
 
 
-@njit(cache=True, parallel=True)
+@njit(**JIT, nogil=True)
 def _gains(positions, rotations, fx, fy, cx, cy, width, height, stride, max_range, state, lo, res,
-           visibility, out):
-    # The walk: every voxel of every ray, from the map's box entry.
+           visibility, out, worker, workers):
+    # The walk: every voxel of every ray, from the map's box entry; views worker, worker +
+    # workers, ... (tpvp.numba_tools.run_workers).
     ncols = (width + stride - 1) // stride
     nrows = (height + stride - 1) // stride
     mode = MODE_VISIBILITY if visibility > 0.0 else MODE_GAIN
     tag = visibility if visibility > 0.0 else 1.0
     no_keys = np.zeros(0, dtype=np.int64)
-    for v in prange(positions.shape[0]):
+    for v in range(worker, positions.shape[0], workers):
         ox, oy, oz = positions[v, 0], positions[v, 1], positions[v, 2]
         rot = rotations[v]
         # Per view and voxel: 1 once counted (each unknown voxel counts once), or best visibility.
@@ -241,7 +273,7 @@ def _gains(positions, rotations, fx, fy, cx, cy, width, height, stride, max_rang
             for c in range(ncols):
                 dx, dy, dz, t_stop = pixel_ray(rot, c, stride, yn, cx, fx, max_range)
                 count += walk(ox, oy, oz, dx, dy, dz, t_stop, state, lo[0], lo[1], lo[2], res,
-                              mode, True, 0, 0, 0, stamp, tag, no_keys)
+                              mode, TRUE, ZERO, ZERO, ZERO, stamp, tag, no_keys)
         out[v] = stamp.sum() if visibility > 0.0 else count
 
 
@@ -318,8 +350,8 @@ def information_gain(occupancy: OccupancyMap, positions, look_ats, stride: int =
     state = np.array(occupancy.state, order="C")
     lo, res, stride = occupancy.origin_key, occupancy.resolution, int(stride)
     if reference or visibility:
-        _gains(positions, rotations, k.fx, k.fy, k.cx, k.cy, int(k.width), int(k.height), stride,
-               float(max_range), state, lo, res, visibility, out)
+        run_workers(_gains, len(positions), positions, rotations, k.fx, k.fy, k.cx, k.cy, int(k.width),
+                    int(k.height), stride, float(max_range), state, lo, res, visibility, out)
         return out
     unknown = np.argwhere(state == UNKNOWN)
     if not len(unknown):
@@ -328,10 +360,10 @@ def information_gain(occupancy: OccupancyMap, positions, look_ats, stride: int =
     both = np.concatenate([unknown, occupied])
     box = np.r_[both.min(axis=0), both.max(axis=0) + 1] + np.r_[lo, lo]
     # Keys in C order (argwhere's are F-ordered, or C for a single row: one kernel type for all).
-    _gains_by_voxel(positions, rotations, _window(positions, rotations, box, res, k, stride), k.fx,
-                    k.fy, k.cx, k.cy, stride, float(max_range), np.ascontiguousarray(occupied + lo),
-                    np.ascontiguousarray(unknown + lo), res, min(len(positions), numba.get_num_threads()),
-                    out)
+    run_workers(_gains_by_voxel, len(positions), positions, rotations,
+                _window(positions, rotations, box, res, k, stride), k.fx, k.fy, k.cx, k.cy, stride,
+                float(max_range), np.ascontiguousarray(occupied + lo), np.ascontiguousarray(unknown + lo),
+                res, out)
     return out
 
 

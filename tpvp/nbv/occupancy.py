@@ -28,6 +28,7 @@ import numpy as np
 from numba import njit
 
 from tpvp.errors import ConfigError, PointCloudError
+from tpvp.numba_tools import JIT
 from tpvp.scene import voxels
 from tpvp.sensor.camera import D435, Intrinsics, look_at_rotation
 from tpvp.sensor.raycast import dda_step, encode_key_jit, event_times, keys_after, ray_setup, slab
@@ -214,13 +215,19 @@ class OccupancyMap:
         return out
 
 
-MODE_GAIN = 0
-MODE_CARVE = 1
-MODE_FREESPACE = 2
-MODE_VISIBILITY = 3
+# Modes of walk, and the constants its callers pass: numpy scalars, because numba types a Python
+# constant argument as a literal and compiles walk once per literal; with these every kernel calls
+# the one compiled walk.
+MODE_GAIN = np.int64(0)
+MODE_CARVE = np.int64(1)
+MODE_FREESPACE = np.int64(2)
+MODE_VISIBILITY = np.int64(3)
+ZERO = np.int64(0)
+TRUE = np.bool_(True)
+FALSE = np.bool_(False)
 
 
-@njit(cache=True, inline="always")
+@njit(**JIT)
 def pixel_ray(rot, c, stride, yn, cx, fx, max_range):
     """World direction of pixel column ``c`` on a row with normalised ``yn`` (the element-wise
     expression of ``pixel_ray_directions``, bit for bit) and the ray parameter at ``max_range``."""
@@ -231,7 +238,21 @@ def pixel_ray(rot, c, stride, yn, cx, fx, max_range):
     return dx, dy, dz, max_range / math.sqrt(dx * dx + dy * dy + dz * dz)
 
 
-@njit(cache=True)
+@njit(**JIT)
+def _contains(values, value):
+    """Whether the sorted ``values`` hold ``value`` (a binary search: np.searchsorted would cost
+    numba half a second more to compile)."""
+    lo, hi = 0, values.size
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if values[mid] < value:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo < values.size and values[lo] == value
+
+
+@njit(**JIT)
 def walk(ox, oy, oz, dx, dy, dz, t_stop, state, lo0, lo1, lo2, res, mode, skip,
          ex, ey, ez, stamp, tag, outer):
     """Walk ray ``o + t d`` through the map's voxels (never entering one beyond ``t_stop``).
@@ -295,9 +316,7 @@ def walk(ox, oy, oz, dx, dy, dz, t_stop, state, lo0, lo1, lo2, res, mode, skip,
               or (iy >= n1 and sy >= 0) or (iz < 0 and sz <= 0) or (iz >= n2 and sz >= 0)):
             return count  # outside and not approaching the (convex) box: it never comes back
         elif mode == MODE_FREESPACE and outer.size > 0:
-            code = encode_key_jit(kx, ky, kz)
-            j = np.searchsorted(outer, code)
-            if j < outer.size and outer[j] == code:
+            if _contains(outer, encode_key_jit(kx, ky, kz)):
                 return 0
         moved, kx, ky, kz, tx, ty, tz = dda_step(kx, ky, kz, tx, ty, tz, sx, sy, sz, ox, oy, oz,
                                                  inv_x, inv_y, inv_z, res, t_stop)
@@ -305,7 +324,7 @@ def walk(ox, oy, oz, dx, dy, dz, t_stop, state, lo0, lo1, lo2, res, mode, skip,
             return count
 
 
-@njit(cache=True)
+@njit(**JIT)
 def _carve(position, keys, state, lo, res):
     # Serial: a few thousand rays per view, and parallel writers would race on shared voxels.
     stamp = np.zeros(1)
@@ -317,11 +336,11 @@ def _carve(position, keys, state, lo, res):
         dx = (ex + 0.5) * res - ox
         dy = (ey + 0.5) * res - oy
         dz = (ez + 0.5) * res - oz
-        walk(ox, oy, oz, dx, dy, dz, 1.0, state, lo[0], lo[1], lo[2], res, MODE_CARVE, False,
+        walk(ox, oy, oz, dx, dy, dz, 1.0, state, lo[0], lo[1], lo[2], res, MODE_CARVE, FALSE,
              ex, ey, ez, stamp, 1.0, no_keys)
 
 
-@njit(cache=True)
+@njit(**JIT)
 def _carve_pixels(position, rot, fx, fy, cx, cy, width, height, stride, max_range, state, lo, res,
                   own, outer):
     # Serial, as _carve. Directions as in tpvp.nbv.information_gain._gains (pixel_ray_directions,
@@ -336,4 +355,4 @@ def _carve_pixels(position, rot, fx, fy, cx, cy, width, height, stride, max_rang
         for c in range(ncols):
             dx, dy, dz, t_stop = pixel_ray(rot, c, stride, yn, cx, fx, max_range)
             walk(ox, oy, oz, dx, dy, dz, t_stop, state, lo[0], lo[1], lo[2], res, MODE_FREESPACE,
-                 skip, 0, 0, 0, own, 1.0, outer)
+                 skip, ZERO, ZERO, ZERO, own, 1.0, outer)

@@ -38,12 +38,12 @@ Deviations (fixes):
 * Adam and the exponential decay are written out in numpy (:class:`_Adam`; torch.optim's numbers up
   to the rounding of its fused multiply-adds, ~1e-15, checked by a test), so registering never
   imports torch (~2 s of a command's start-up; torch.optim's first use imports torch._dynamo too);
-* the losses and their gradient are computed by hand (numba kernel :func:`_loss_and_gradient`), not
-  by torch autograd: with ~1000-point tensors the reference spent its 10 ms per iteration on
-  per-op and autograd overhead and on scipy KD-tree queries. Same maths (Rodrigues and its
-  derivative, the displacement-form blend, ARAP, truncated Chamfer with the nearest neighbours held
-  fixed, the Laplacian with its weights held constant), same random subsets, same Adam, same
-  stop rule: the result equals the autograd implementation
+* the losses and their gradient are computed by hand (numba kernels, one iteration in
+  :func:`_loss_and_gradient`), not by torch autograd: with ~1000-point tensors the reference
+  spent its 10 ms per iteration on per-op and autograd overhead and on scipy KD-tree queries.
+  Same maths (Rodrigues and its derivative, the displacement-form blend, ARAP, truncated Chamfer
+  with the nearest neighbours held fixed, the Laplacian with its weights held constant), same
+  random subsets, same Adam, same stop rule: the result equals the autograd implementation
   (:func:`tpvp.registration.autograd_reference.optimise_autograd`, kept as the tests' oracle) up to rounding (~1e-17 m
   on the benchmark pairs after 300 iterations). The nearest neighbours come from an exact uniform
   grid search instead of scipy's KD-tree (:func:`_grid_knn`; among points at exactly equal
@@ -52,7 +52,7 @@ Deviations (fixes):
   shared 2-core machine (``benchmarks/registration_bench.py``); ~3/4 of it is the iterations, of
   which the nearest-neighbour searches are ~60 %. The Laplacian is still evaluated every
   iteration (~40 % of one), since it enters the recorded losses and the stop test. The kernels
-  are compiled once per machine and source version (numba cache, ~15-30 s) and loaded in ~0.4 s
+  are compiled once per machine and source version (numba cache, ~3.5 s) and loaded in ~0.05 s
   by a process's first call (:func:`compile_kernels` does that up front);
 * float64 throughout (reference float32); inputs are checked (empty, NaN, units, overlap);
 * if every anchor weight of a point underflows (impossible at the default settings) the point
@@ -76,6 +76,7 @@ from scipy.spatial import cKDTree
 from tpvp.errors import ConfigError, PointCloudError, checked_cloud
 from tpvp.io.units import MM_EXTENT_THRESHOLD
 from tpvp.metrics.geometry import chamfer_distance
+from tpvp.numba_tools import JIT
 from tpvp.scene import voxels
 
 # Clouds whose largest sides differ by more than this factor are assumed to be in different units.
@@ -265,7 +266,7 @@ def _warp_numpy(points, nodes, rotations, translations, idx, w) -> np.ndarray:
 # numba kernels: one optimisation iteration (losses + analytic gradient) and a grid k-NN
 # --------------------------------------------------------------------------------------------------
 
-_JIT = dict(cache=True, error_model="numpy")  # numpy semantics: 0/0 is NaN (as in torch), no raise
+_JIT = dict(JIT, error_model="numpy")  # numpy semantics: 0/0 is NaN (as in torch), no raise
 
 
 @njit(**_JIT)
@@ -325,7 +326,7 @@ def _grid_build(ref):
     return lo, h, dims, start, order, pts
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(**_JIT, inline="always")
 def _scan_cell(q, pts, order, start, cell, s, k, out_idx, out_d2):
     """Insert the points of one grid cell into query s's sorted k best (strictly closer only)."""
     for j in range(start[cell], start[cell + 1]):
@@ -389,7 +390,7 @@ def _grid_knn(ref, queries, k, out_idx, out_d2):
             r += 1
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(**_JIT, inline="always")
 def _rodrigues_coefficients(theta2):
     """``(a, b, a', b')``: R = I + a K + b K^2 for theta^2 = |phi|^2, and d(a, b)/d theta^2 (series
     below 1e-8, where the closed forms lose precision)."""
@@ -503,7 +504,7 @@ def _warp_backward(dX, P, sel, a_idx, a_w, nodes, gR, g_t):
                 g_t[n, i] += gi
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(**_JIT, inline="always")
 def _add_arc_gradient(gR, g_t, m, j, i, gi, g0, g1, g2):
     gR[m, i, 0] += gi * g0
     gR[m, i, 1] += gi * g1
@@ -536,7 +537,7 @@ def _arap(R, t, g_ij, e_idx, e_w, scale, gR, g_t):
     return total * inv
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(**_JIT)
 def _directed_chamfer(X, Qs, x_idx, q_idx, truncation, dX):
     """Mean truncated squared distance over the pairs (X[x_idx[s]], Qs[q_idx[s]]); its gradient
     with respect to X is added to dX."""
@@ -555,20 +556,18 @@ def _directed_chamfer(X, Qs, x_idx, q_idx, truncation, dX):
     return total / m
 
 
-@njit(**_JIT)
 def _chamfer(X, Qs, truncation, dX):
     """Two-sided truncated squared Chamfer of two subsets (sum of the directed means) and its
-    gradient with respect to X (the NN choice held fixed, as autograd does)."""
+    gradient with respect to X (the NN choice held fixed, as autograd does). Python calling the
+    kernels, as :func:`_loss_and_gradient`."""
     n, nq = X.shape[0], Qs.shape[0]
-    idx = np.empty((n, 1), np.int64)
-    d2 = np.empty((n, 1))
+    idx, d2 = np.empty((n, 1), np.int64), np.empty((n, 1))
     _grid_knn(Qs, X, 1, idx, d2)
-    idx_q = np.empty((nq, 1), np.int64)
-    d2_q = np.empty((nq, 1))
+    idx_q, d2_q = np.empty((nq, 1), np.int64), np.empty((nq, 1))
     _grid_knn(X, Qs, 1, idx_q, d2_q)
     dX[:] = 0.0
-    return (_directed_chamfer(X, Qs, np.arange(n), idx[:, 0], truncation, dX)
-            + _directed_chamfer(X, Qs, idx_q[:, 0], np.arange(nq), truncation, dX))
+    return (_directed_chamfer(X, Qs, np.arange(n), idx.reshape(n), truncation, dX)
+            + _directed_chamfer(X, Qs, idx_q.reshape(nq), np.arange(nq), truncation, dX))
 
 
 @njit(**_JIT)
@@ -597,18 +596,23 @@ def _kth_smallest(values, kth):
     return a[kth]
 
 
-@njit(**_JIT)
 def _laplacian(X, k, dX):
     """Membrane Laplacian of a subset (mean of W_ij |x_i - x_j|^2 over its k-NN graph, W held
-    constant) and, in dX, its gradient."""
+    constant) and, in dX, its gradient. Python calling the kernels, as :func:`_loss_and_gradient`."""
     n = X.shape[0]
     dX[:] = 0.0
     k = min(k, n - 1)
     if k < 1:
         return 0.0
-    idx = np.empty((n, k + 1), np.int64)
-    d2 = np.empty((n, k + 1))
+    idx, d2 = np.empty((n, k + 1), np.int64), np.empty((n, k + 1))
     _grid_knn(X, X, k + 1, idx, d2)
+    return _laplacian_terms(X, idx, d2, k, dX)
+
+
+@njit(**_JIT)
+def _laplacian_terms(X, idx, d2, k, dX):
+    """:func:`_laplacian` given the k + 1 nearest neighbours of every point (``idx``, ``d2``)."""
+    n = X.shape[0]
     # drop column 0, the closest (the point itself, or one copy of a duplicate: the same values)
     d = np.empty(n * k)
     for i in range(n):
@@ -639,12 +643,15 @@ def _laplacian(X, k, dX):
     return total / (n * k)
 
 
-@njit(**_JIT)
 def _loss_and_gradient(phi, t, P, Q, nodes, a_idx, a_w, e_idx, e_w, g_ij, sel_p, sel_q, sel_l,
                        w_arap, w_chamfer, w_laplacian, laplacian_in_gradient, laplacian_k, truncation,
                        g_phi, g_t):
     """One iteration: the unweighted (ARAP, Chamfer, Laplacian) losses at (phi, t), and the gradient
-    of the weighted total (the Laplacian only if ``laplacian_in_gradient``) in g_phi, g_t."""
+    of the weighted total (the Laplacian only if ``laplacian_in_gradient``) in g_phi, g_t.
+
+    Python calling the kernels: as one numba kernel it cost a second more to compile on a cold
+    cache (numba compiles every kernel a kernel calls once more, inside the caller), for ~20 ms
+    less per 300 iterations (~3 % of a registration)."""
     M = phi.shape[0]
     R = np.empty((M, 3, 3))
     da = np.empty(M)
@@ -655,10 +662,7 @@ def _loss_and_gradient(phi, t, P, Q, nodes, a_idx, a_w, e_idx, e_w, g_ij, sel_p,
     l_arap = _arap(R, t, g_ij, e_idx, e_w, w_arap, gR, g_t)
     X = np.empty((sel_p.shape[0], 3))
     _warp_subset(P, sel_p, a_idx, a_w, nodes, R, t, X)
-    Qs = np.empty((sel_q.shape[0], 3))
-    for s in range(sel_q.shape[0]):
-        for a in range(3):
-            Qs[s, a] = Q[sel_q[s], a]
+    Qs = Q[sel_q]
     dX = np.empty_like(X)
     l_cd = _chamfer(X, Qs, truncation, dX)
     dX *= w_chamfer
@@ -735,7 +739,7 @@ class _Adam:
 
 def _optimise(P, Q, nodes, edge_idx, edge_w, anchor_idx, anchor_w, config: EDConfig):
     """The optimisation loop of :func:`tpvp.registration.autograd_reference.optimise_autograd` with the losses and their gradient from
-    the numba kernel :func:`_loss_and_gradient` (same random subsets, same Adam, same stop rule)."""
+    the numba kernels of :func:`_loss_and_gradient` (same random subsets, same Adam, same stop rule)."""
     rng = np.random.default_rng(config.seed)
     M = len(nodes)
     # one array type for every call (C-contiguous, writeable): other layouts would compile anew
@@ -777,7 +781,7 @@ def compile_kernels() -> float:
     """Compile the numba kernels (or load them from numba's on-disk cache) with a 2-iteration
     registration of a tiny pair, through the same code path and argument types as real calls;
     returns the seconds. A run timed after it measures the registration, not the compilation
-    (first run on a machine: ~15-30 s; cache load: ~0.4 s)."""
+    (first run on a machine: ~3.5 s on a quiet 2-core machine; cache load: ~0.05 s)."""
     start = time.perf_counter()
     rng = np.random.default_rng(0)
     P = rng.uniform(0.0, 0.02, size=(60, 3))

@@ -9,19 +9,20 @@
   is tested exactly (ray-plane intersection inside the face square), the projected face only bounds
   which pixels to test.
 
-Single views run serially; batches of views are parallel over views, because numba's thread pool
-stalls on sub-millisecond work when the other core is busy.
+Single views run serially; batches of views are split over threads (:mod:`tpvp.numba_tools`), because a
+thread pool stalls on sub-millisecond work when the other core is busy.
 """
 
 from __future__ import annotations
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
+from tpvp.numba_tools import JIT
 from tpvp.sensor.raycast import MISS, cast_ray
 
 
-@njit(cache=True, inline="always")
+@njit(**JIT)
 def _segment_exit(pos, rx, ry, rz, box):
     """Parameter where the segment ``pos + t r`` (``t`` in [0, 1]) leaves the box ``(lo, hi)``.
 
@@ -46,7 +47,7 @@ def _segment_exit(pos, rx, ry, rz, box):
     return t1
 
 
-@njit(cache=True)
+@njit(**JIT)
 def reference_view(pos, rot, fx, fy, cx, cy, width, height, centres, index, clearance, lo, res,
                    max_range_sq, countable, countable_box, first_hit):
     """Fill ``first_hit[i]`` with the voxel seen along the ray toward centre ``i`` (MISS if none).
@@ -82,7 +83,7 @@ def reference_view(pos, rot, fx, fy, cx, cy, width, height, centres, index, clea
     return rays
 
 
-@njit(cache=True)
+@njit(**JIT)
 def countable_hit_ids(first_hit, countable):
     """Sorted distinct countable voxel ids in ``first_hit`` (a marker array, no sort)."""
     seen = np.zeros(countable.shape[0], dtype=np.bool_)
@@ -90,7 +91,7 @@ def countable_hit_ids(first_hit, countable):
     return np.flatnonzero(seen)
 
 
-@njit(cache=True)
+@njit(**JIT)
 def _mark_hits(first_hit, countable, seen):
     for i in range(first_hit.shape[0]):
         h = first_hit[i]
@@ -98,13 +99,13 @@ def _mark_hits(first_hit, countable, seen):
             seen[h] = True
 
 
-@njit(cache=True, parallel=True)
+@njit(**JIT, nogil=True)
 def reference_views(positions, rotations, fx, fy, cx, cy, width, height, centres, index, clearance,
-                    lo, res, max_range_sq, countable, countable_box, seen):
-    """``seen[v, id] = True`` for every countable voxel observed from view ``v`` (parallel over views)."""
-    n = centres.shape[0]
-    for v in prange(positions.shape[0]):
-        first_hit = np.empty(n, dtype=np.int64)
+                    lo, res, max_range_sq, countable, countable_box, seen, worker, workers):
+    """``seen[v, id] = True`` for every countable voxel observed from view ``v``, for views ``worker,
+    worker + workers, ...`` (:func:`tpvp.numba_tools.run_workers`)."""
+    first_hit = np.empty(centres.shape[0], dtype=np.int64)
+    for v in range(worker, positions.shape[0], workers):
         reference_view(positions[v], rotations[v], fx, fy, cx, cy, width, height, centres, index,
                        clearance, lo, res, max_range_sq, countable, countable_box, first_hit)
         _mark_hits(first_hit, countable, seen[v])
@@ -114,7 +115,7 @@ def reference_views(positions, rotations, fx, fy, cx, cy, width, height, centres
 # pixel model
 
 
-@njit(cache=True)
+@njit(**JIT)
 def exposed_faces(keys, index, lo):
     """6-bit mask per voxel: bit ``2*axis`` = face on the low side exposed, ``2*axis+1`` = high side."""
     n0, n1, n2 = index.shape
@@ -147,7 +148,7 @@ _CUBE_EDGES = np.array([[0, 1], [2, 3], [4, 5], [6, 7], [0, 2], [1, 3], [4, 6], 
 _QUAD_EDGES = np.array([[0, 1], [1, 3], [3, 2], [2, 0]], dtype=np.int64)
 
 
-@njit(cache=True)
+@njit(**JIT)
 def _clipped_bounds(cam, edges, fx, fy, cx, cy):
     """Image bounds ``(umin, umax, vmin, vmax)`` of a convex solid/polygon given by its corners in
     camera coordinates, clipped to the half-space in front of the camera (empty when all behind)."""
@@ -178,7 +179,7 @@ def _clipped_bounds(cam, edges, fx, fy, cx, cy):
     return umin, umax, vmin, vmax
 
 
-@njit(cache=True)
+@njit(**JIT)
 def pixel_window(pos, rot, fx, fy, cx, cy, width, height, stride, centres, res):
     """Strided pixel rows/columns ``(row0, row1, col0, col1)`` (inclusive) that any voxel can cover.
 
@@ -224,7 +225,7 @@ def pixel_window(pos, rot, fx, fy, cx, cy, width, height, stride, centres, res):
     return _pixel_range(umin, umax, vmin, vmax, stride, 2.0, rows, cols)
 
 
-@njit(cache=True, inline="always")
+@njit(**JIT)
 def _pixel_range(umin, umax, vmin, vmax, stride, slack, rows, cols):
     """Strided pixel indices inside the image bounds widened by ``slack`` pixels, clamped to the
     image."""
@@ -240,7 +241,7 @@ def _pixel_range(umin, umax, vmin, vmax, stride, slack, rows, cols):
     return r0, r1, c0, c1
 
 
-@njit(cache=True)
+@njit(**JIT)
 def pixel_view(pos, rot, fx, fy, cx, cy, stride, keys, exposed, res, row0, col0, depth, hit):
     """Z-buffer of exposed camera-facing faces on a window of the strided pixel grid.
 
@@ -333,7 +334,7 @@ def pixel_view(pos, rot, fx, fy, cx, cy, stride, keys, exposed, res, row0, col0,
                     hit[r, c] = i
 
 
-@njit(cache=True)
+@njit(**JIT)
 def _mark_pixel_hits(hit, pos, centres, countable, max_range_sq, seen):
     rows, cols = hit.shape
     for r in range(rows):
@@ -347,7 +348,7 @@ def _mark_pixel_hits(hit, pos, centres, countable, max_range_sq, seen):
                     seen[h] = True
 
 
-@njit(cache=True)
+@njit(**JIT)
 def pixel_view_seen(pos, rot, fx, fy, cx, cy, width, height, stride, keys, exposed, res, centres,
                     max_range_sq, countable, seen, depth_buffer, hit_buffer):
     """Mark in ``seen`` the countable voxels (within range) that any pixel ray of the view hits.
@@ -364,20 +365,17 @@ def pixel_view_seen(pos, rot, fx, fy, cx, cy, width, height, stride, keys, expos
     _mark_pixel_hits(hit, pos, centres, countable, max_range_sq, seen)
 
 
-@njit(cache=True, parallel=True)
+@njit(**JIT, nogil=True)
 def pixel_views(positions, rotations, fx, fy, cx, cy, width, height, stride, keys, exposed, res,
-                centres, max_range_sq, countable, seen, threads):
-    """``seen[v, id] = True`` for every countable voxel seen by a pixel of view ``v``.
-
-    Views are split into one contiguous block per thread so each thread reuses one scratch image.
-    """
+                centres, max_range_sq, countable, seen, worker, workers):
+    """``seen[v, id] = True`` for every countable voxel seen by a pixel of view ``v``, for the
+    ``worker``-th of ``workers`` contiguous blocks of views (:func:`tpvp.numba_tools.run_workers`; one
+    scratch image per block)."""
     rows = (height + stride - 1) // stride
     cols = (width + stride - 1) // stride
     n = positions.shape[0]
-    blocks = max(1, min(n, threads))
-    for b in prange(blocks):
-        depth = np.empty((rows, cols))
-        hit = np.empty((rows, cols), dtype=np.int64)
-        for v in range(b * n // blocks, (b + 1) * n // blocks):
-            pixel_view_seen(positions[v], rotations[v], fx, fy, cx, cy, width, height, stride, keys,
-                            exposed, res, centres, max_range_sq, countable, seen[v], depth, hit)
+    depth = np.empty((rows, cols))
+    hit = np.empty((rows, cols), dtype=np.int64)
+    for v in range(worker * n // workers, (worker + 1) * n // workers):
+        pixel_view_seen(positions[v], rotations[v], fx, fy, cx, cy, width, height, stride, keys,
+                        exposed, res, centres, max_range_sq, countable, seen[v], depth, hit)

@@ -16,7 +16,9 @@ voxels it would have visited without the jump; only empty voxels are skipped.
 The stepping is shared with the occupancy map of :mod:`tpvp.nbv.occupancy` (one DDA for both):
 ``ray_setup`` (step signs, reciprocals, start voxel), ``slab`` (entry interval of a box),
 ``keys_after`` (state after every event before a ray parameter, the exact jump), ``event_times``
-and ``dda_step`` (one step, ties to the lowest axis). They are inlined into the callers' loops.
+and ``dda_step`` (one step, ties to the lowest axis). They are separate kernels, inlined by LLVM
+when a caller is optimised (numba's own ``inline="always"`` retyped them at every call site: a
+third more compile time, and no faster code).
 """
 
 from __future__ import annotations
@@ -24,15 +26,16 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from tpvp.numba_tools import JIT
 from tpvp.scene.voxels import encode_key
 
 MISS = -1
 
 # Code of a voxel key (:func:`tpvp.scene.voxels.encode_key`, the same function) inside kernels.
-encode_key_jit = njit(cache=True, inline="always")(encode_key)
+encode_key_jit = njit(**JIT)(encode_key)
 
 
-@njit(cache=True, inline="always")
+@njit(**JIT)
 def event_time(k, step, res, o, inv):
     """Ray parameter at which the ray leaves voxel ``k`` along one axis (``inv = 1 / d``)."""
     if step > 0:
@@ -42,7 +45,7 @@ def event_time(k, step, res, o, inv):
     return np.inf
 
 
-@njit(cache=True)
+@njit(**JIT)
 def key_after(o, d, inv, step, k0, t0, res):
     """Voxel index along one axis once every boundary event with ``t < t0`` has been processed.
 
@@ -53,24 +56,25 @@ def key_after(o, d, inv, step, k0, t0, res):
     if step == 0:
         return k0
     k = np.int64(np.floor((o + t0 * d) / res))
+    # step is 1 or -1 in the branches (passed on, not as a literal: one compiled event_time)
     if step > 0:
         if k < k0:
             k = k0
-        while k > k0 and event_time(k - 1, 1, res, o, inv) >= t0:
+        while k > k0 and event_time(k - 1, step, res, o, inv) >= t0:
             k -= 1
-        while event_time(k, 1, res, o, inv) < t0:
+        while event_time(k, step, res, o, inv) < t0:
             k += 1
     else:
         if k > k0:
             k = k0
-        while k < k0 and event_time(k + 1, -1, res, o, inv) >= t0:
+        while k < k0 and event_time(k + 1, step, res, o, inv) >= t0:
             k += 1
-        while event_time(k, -1, res, o, inv) < t0:
+        while event_time(k, step, res, o, inv) < t0:
             k -= 1
     return k
 
 
-@njit(cache=True, inline="always")
+@njit(**JIT)
 def _sign(x):
     if x > 0:
         return 1
@@ -79,7 +83,7 @@ def _sign(x):
     return 0
 
 
-@njit(cache=True, inline="always")
+@njit(**JIT)
 def ray_setup(ox, oy, oz, dx, dy, dz, res):
     """Start of the DDA along ``o + t d``: ``(sx, sy, sz, inv_x, inv_y, inv_z, kx, ky, kz)``.
 
@@ -96,7 +100,7 @@ def ray_setup(ox, oy, oz, dx, dy, dz, res):
     return sx, sy, sz, inv_x, inv_y, inv_z, kx, ky, kz
 
 
-@njit(cache=True, inline="always")
+@njit(**JIT)
 def slab(o, d, inv, low, high, parallel_inside):
     """Ray-parameter interval ``(t_in, t_out)`` inside the slab ``low <= x <= high`` of one axis.
 
@@ -112,7 +116,7 @@ def slab(o, d, inv, low, high, parallel_inside):
     return np.inf, -np.inf
 
 
-@njit(cache=True, inline="always")
+@njit(**JIT)
 def keys_after(ox, oy, oz, dx, dy, dz, inv_x, inv_y, inv_z, sx, sy, sz, kx0, ky0, kz0, t0, res):
     """Voxel ``(kx, ky, kz)`` of the DDA from ``(kx0, ky0, kz0)`` after every event with ``t < t0``
     (an exact jump, see :func:`key_after`)."""
@@ -121,14 +125,14 @@ def keys_after(ox, oy, oz, dx, dy, dz, inv_x, inv_y, inv_z, sx, sy, sz, kx0, ky0
             key_after(oz, dz, inv_z, sz, kz0, t0, res))
 
 
-@njit(cache=True, inline="always")
+@njit(**JIT)
 def event_times(kx, ky, kz, sx, sy, sz, ox, oy, oz, inv_x, inv_y, inv_z, res):
     """Ray parameters ``(tx, ty, tz)`` at which the ray leaves voxel ``(kx, ky, kz)`` per axis."""
     return (event_time(kx, sx, res, ox, inv_x), event_time(ky, sy, res, oy, inv_y),
             event_time(kz, sz, res, oz, inv_z))
 
 
-@njit(cache=True, inline="always")
+@njit(**JIT)
 def dda_step(kx, ky, kz, tx, ty, tz, sx, sy, sz, ox, oy, oz, inv_x, inv_y, inv_z, res, t_stop):
     """One DDA step: ``(moved, kx, ky, kz, tx, ty, tz)``.
 
@@ -153,7 +157,7 @@ def dda_step(kx, ky, kz, tx, ty, tz, sx, sy, sz, ox, oy, oz, inv_x, inv_y, inv_z
     return True, kx, ky, kz, tx, ty, tz
 
 
-@njit(cache=True)
+@njit(**JIT)
 def cast_ray(ox, oy, oz, dx, dy, dz, index, clearance, lo0, lo1, lo2, res, max_range_sq, t_stop):
     """Id of the first occupied voxel hit by ray ``o + t d`` (within range), else ``MISS``.
 

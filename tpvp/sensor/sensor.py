@@ -9,10 +9,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-import numba
 import numpy as np
 
 from tpvp.errors import ConfigError, SensorError
+from tpvp.numba_tools import run_workers
 from tpvp.scene.grid import OccupancyGrid
 from tpvp.sensor import kernels
 from tpvp.sensor.camera import D435, Intrinsics, look_at_rotation
@@ -57,18 +57,20 @@ def check_camera(grid: OccupancyGrid, position) -> np.ndarray:
     return position
 
 
-def _extras(grid: OccupancyGrid) -> dict:
-    # Derived arrays used by the kernels, computed once per grid and cached on the instance.
+def _extras(grid: OccupancyGrid, pixel: bool = False) -> dict:
+    # Derived arrays used by the kernels, computed once per grid and cached on the instance; the
+    # exposed faces only once the pixel model needs them (a kernel the reference model never compiles).
     cache = grid.__dict__.setdefault("_kernel_cache", {})
     if not cache:
         cache["centres"] = np.ascontiguousarray(grid.centres)
         cache["lo"] = np.ascontiguousarray(grid.origin_key)
         cache["countable"] = np.ascontiguousarray(grid.countable)
         cache["keys"] = np.ascontiguousarray(grid.keys)
-        cache["exposed"] = kernels.exposed_faces(cache["keys"], grid.index, cache["lo"])
         counted = grid.keys[grid.countable] if grid.countable.any() else grid.keys
         cache["countable_box"] = np.concatenate(
             [(counted.min(axis=0) - 1) * grid.resolution, (counted.max(axis=0) + 2) * grid.resolution])
+    if pixel and "exposed" not in cache:
+        cache["exposed"] = kernels.exposed_faces(cache["keys"], grid.index, cache["lo"])
     return cache
 
 
@@ -76,7 +78,7 @@ def observe(grid: OccupancyGrid, position, look_at, config: SensorConfig = Senso
     """Sorted ids of the countable voxels observed from one view."""
     position = check_camera(grid, position)
     rotation = look_at_rotation(position, look_at)
-    ex = _extras(grid)
+    ex = _extras(grid, pixel=config.model == "pixel")
     k = config.intrinsics
     if config.model == "reference":
         first_hit = np.empty(grid.size, dtype=np.int64)
@@ -113,7 +115,7 @@ def depth_image(grid: OccupancyGrid, position, look_at, config: SensorConfig = S
     """
     position = check_camera(grid, position)
     rotation = look_at_rotation(position, look_at)
-    ex = _extras(grid)
+    ex = _extras(grid, pixel=True)
     k = config.intrinsics
     stride = int(config.pixel_stride)
     shape = (-(-k.height // stride), -(-k.width // stride))
@@ -154,7 +156,7 @@ def observe_poses(grid: OccupancyGrid, positions, rotations,
 
     The work behind :func:`observe_many` and :func:`tpvp.visibility.visibility_matrix`.
     """
-    ex = _extras(grid)
+    ex = _extras(grid, pixel=config.model == "pixel")
     k = config.intrinsics
     seen = np.zeros((len(positions), grid.size), dtype=np.bool_)
     if len(positions) == 0:
@@ -163,12 +165,11 @@ def observe_poses(grid: OccupancyGrid, positions, rotations,
     positions = np.array(positions, dtype=np.float64, order="C")
     rotations = np.array(rotations, dtype=np.float64, order="C")
     if config.model == "reference":
-        kernels.reference_views(positions, rotations, k.fx, k.fy, k.cx, k.cy, k.width, k.height,
-                                ex["centres"], grid.index, grid.clearance, ex["lo"], grid.resolution,
-                                float(config.max_range) ** 2, ex["countable"], ex["countable_box"], seen)
+        run_workers(kernels.reference_views, len(positions), positions, rotations, k.fx, k.fy, k.cx, k.cy,
+                    k.width, k.height, ex["centres"], grid.index, grid.clearance, ex["lo"], grid.resolution,
+                    float(config.max_range) ** 2, ex["countable"], ex["countable_box"], seen)
     else:
-        kernels.pixel_views(positions, rotations, k.fx, k.fy, k.cx, k.cy, k.width, k.height,
-                            int(config.pixel_stride), ex["keys"], ex["exposed"], grid.resolution,
-                            ex["centres"], float(config.max_range) ** 2, ex["countable"], seen,
-                            numba.get_num_threads())
+        run_workers(kernels.pixel_views, len(positions), positions, rotations, k.fx, k.fy, k.cx, k.cy,
+                    k.width, k.height, int(config.pixel_stride), ex["keys"], ex["exposed"], grid.resolution,
+                    ex["centres"], float(config.max_range) ** 2, ex["countable"], seen)
     return seen

@@ -7,7 +7,9 @@ the first success; the voxel that blocks a failed ray is itself marked visible (
 of that ray, so it is truly seen).
 
 Every voxel runs its own search (already-marked voxels are not skipped), which makes the result
-independent of the processing order, hence deterministic under parallel execution.
+independent of the processing order, hence deterministic under parallel execution. The chunk kernel
+keeps ``parallel=True``: greenhouse rows only compile it, and it pays (1.7x on 2 cores: 10.3 s
+against 17.7 s on a generated row at 2 cm).
 """
 
 from __future__ import annotations
@@ -17,12 +19,13 @@ from numba import njit, prange
 from tqdm.auto import tqdm
 
 from tpvp.errors import ConfigError
+from tpvp.numba_tools import JIT
 from tpvp.scene.grid import OccupancyGrid
 from tpvp.sensor.raycast import cast_ray
 from tpvp.sensor.sensor import ROW_RANGE
 
 
-@njit(cache=True)
+@njit(**JIT)
 def _search_voxel(i, viewpoints, centres, index, clearance, lo, res, max_range_sq, first_tries,
                   blockers):
     """Nearest-first search for voxel ``i``; marks blockers of failed rays.
@@ -63,7 +66,7 @@ def _search_voxel(i, viewpoints, centres, index, clearance, lo, res, max_range_s
     return False, rays
 
 
-@njit(cache=True, parallel=True)
+@njit(**JIT, parallel=True)
 def _oracle_chunk(ids, viewpoints, centres, index, clearance, lo, res, max_range_sq, first_tries,
                   found, blockers, rays):
     for n in prange(ids.shape[0]):
