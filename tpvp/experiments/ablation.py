@@ -27,7 +27,7 @@ from tpvp.scene import voxels
 from tpvp.visibility import covered_voxels
 from tpvp.viz.ablation import paired_cases  # noqa: F401 (Tables III and IV per case)
 
-#: The four methods of Tables III and IV (their overrides: ``plants.ONE_SHOT_OVERRIDES``).
+#: The four methods of Tables III and IV (their overrides: ``plants.ONE_SHOT_METHODS``).
 ABLATION_METHODS = ["ours", "ours-no-inflation", "initial-view-only", "initial-view-only-no-inflation"]
 
 #: Origin labels of a planning-surface voxel, in the order of precedence (a voxel occupied by

@@ -216,22 +216,25 @@ def shared_transfer(scene, config):
     return shared(scene, key, lambda: transfer(scene, config))
 
 
-#: Configuration overrides of the one-shot methods: what Tables I, III and IV switch off or on.
-ONE_SHOT_OVERRIDES = {
-    "ours": {},
-    "ours-no-inflation": {"inflation.enabled": False},
-    "initial-view-only": {"nbv.warm_up_views": 0},
-    "initial-view-only-no-inflation": {"nbv.warm_up_views": 0, "inflation.enabled": False},
-    "one-shot-no-prior": {"registration.method": "no-prior", "inflation.enabled": False},
-    "ours-pc-nbv": {"nbv.method": "pc-nbv"},
+#: The one-shot methods: their help and the configuration overrides that Tables I, III and IV
+#: switch off or on.
+ONE_SHOT_METHODS = {
+    "ours": ({}, "the paper's method: warm-up NBV, registration, inflation, set cover, TSP"),
+    "ours-no-inflation": ({"inflation.enabled": False}, "planning on the aligned previous session only (Table III)"),
+    "initial-view-only": ({"nbv.warm_up_views": 0}, "registration on the initial view, no warm-up NBV (Table IV)"),
+    "initial-view-only-no-inflation": ({"nbv.warm_up_views": 0, "inflation.enabled": False},
+                                       "initial view only, without inflation"),
+    "one-shot-no-prior": ({"registration.method": "no-prior", "inflation.enabled": False},
+                          "set cover + TSP on the coarse reconstruction alone (no previous session)"),
+    "ours-pc-nbv": ({"nbv.method": "pc-nbv"}, "the paper's method with the learned PC-NBV warm-up view"),
 }
 
 
 def method_config(config: PlantConfig, method: str) -> PlantConfig:
-    """``config`` with the overrides of the one-shot ``method`` (:data:`ONE_SHOT_OVERRIDES`)."""
-    if method not in ONE_SHOT_OVERRIDES:
-        raise KeyError(f"unknown one-shot method {method!r}; choose from {', '.join(ONE_SHOT_OVERRIDES)}")
-    overrides = ONE_SHOT_OVERRIDES[method]
+    """``config`` with the overrides of the one-shot ``method`` (:data:`ONE_SHOT_METHODS`)."""
+    if method not in ONE_SHOT_METHODS:
+        raise KeyError(f"unknown one-shot method {method!r}; choose from {', '.join(ONE_SHOT_METHODS)}")
+    overrides, _ = ONE_SHOT_METHODS[method]
     return with_overrides(config, overrides)
 
 
@@ -242,15 +245,7 @@ def _one_shot(name: str):
     return method
 
 
-ONE_SHOT_HELP = {
-    "ours": "the paper's method: warm-up NBV, registration, inflation, set cover, TSP",
-    "ours-no-inflation": "planning on the aligned previous session only (Table III)",
-    "initial-view-only": "registration on the initial view, no warm-up NBV (Table IV)",
-    "initial-view-only-no-inflation": "initial view only, without inflation",
-    "one-shot-no-prior": "set cover + TSP on the coarse reconstruction alone (no previous session)",
-    "ours-pc-nbv": "the paper's method with the learned PC-NBV warm-up view",
-}
-for _name, _help in ONE_SHOT_HELP.items():
+for _name, (_, _help) in ONE_SHOT_METHODS.items():
     PLANT_METHODS.register(_name, _help)(_one_shot(_name))
 
 
