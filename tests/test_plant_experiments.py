@@ -97,7 +97,7 @@ def test_the_cache_is_reused_and_an_interrupted_run_resumes(raw, tiny_cases, mon
     pd.testing.assert_frame_equal(again.drop(columns=timings), table.drop(columns=timings), check_dtype=False)
     # a changed configuration never reuses rows
     changed = make_config("plant", {"registration.embedded_deformation.iterations": 21})
-    assert plants.task_key(tiny_cases[0], "ours", changed) != plants.task_key(tiny_cases[0], "ours", CONFIG)
+    assert runner.task_key(tiny_cases[0], "ours", changed) != runner.task_key(tiny_cases[0], "ours", CONFIG)
 
 
 def test_methods_sharing_a_registration_give_the_rows_of_separate_runs(raw, tiny_cases, monkeypatch):
@@ -113,9 +113,9 @@ def test_methods_sharing_a_registration_give_the_rows_of_separate_runs(raw, tiny
         columns = [c for c in alone.columns if c not in timings]
         pd.testing.assert_frame_equal(alone[columns].reset_index(drop=True),
                                       shared[columns].reset_index(drop=True), check_dtype=False)
-    before = plants.task_key(case, "ours", CONFIG)
+    before = runner.task_key(case, "ours", CONFIG)
     monkeypatch.setattr(runner, "RESULTS_VERSION", runner.RESULTS_VERSION + 1)
-    assert plants.task_key(case, "ours", CONFIG) != before  # a change of results never reuses rows
+    assert runner.task_key(case, "ours", CONFIG) != before  # a change of results never reuses rows
 
 
 def test_bad_input_is_one_line(tmp_path, capsys):

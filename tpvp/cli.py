@@ -191,12 +191,12 @@ def _show_config(args) -> int:
 def _experiments_plants(args) -> int:
     config = _config(args)
     cases = plant_experiments.default_cases(args.quick, args.dataset, args.plants, args.pairs, args.paper_subset,
-                                 tuple(args.view_spaces), tuple(args.rotations), tuple(args.initial_views))
+                                            tuple(args.view_spaces), tuple(args.rotations), tuple(args.initial_views))
     methods = args.methods or list(plant_experiments.ALL_METHODS)
     where = f"the Dask cluster {args.scheduler}" if args.scheduler else f"{args.workers} local worker(s)"
     print(f"{len(cases)} cases x {len(methods)} methods on {where}; cache {args.cache}")
     raw = plant_experiments.run_experiments(cases, methods, config, cache_dir=args.cache, workers=args.workers,
-                                 scheduler=args.scheduler)
+                                            scheduler=args.scheduler)
     comparison = plant_experiments.comparison_case(cases) if args.comparison else None
     written = plant_experiments.write_results(args.output, raw, config, comparison=comparison)
     print(plant_experiments.markdown(written["table1_coverage_effort"]))

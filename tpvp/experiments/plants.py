@@ -308,10 +308,6 @@ PLANT_EXPERIMENTS = Experiment("plant experiments", PLANT_METHODS, case_scene,
                                reference=f"{__name__}:PLANT_EXPERIMENTS")
 
 
-def task_key(case: Case, method: str, config: PlantConfig) -> str:
-    return runner.task_key(case, method, config)
-
-
 def run_task(case: Case, method: str, config: PlantConfig, cache_dir=None) -> pd.DataFrame:
     """The rows of one (case, method), from the cache when present; written to it otherwise."""
     return runner.run_task(PLANT_EXPERIMENTS, case, method, config, cache_dir)

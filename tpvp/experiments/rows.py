@@ -253,15 +253,6 @@ ROW_EXPERIMENTS = Experiment("row experiments", ROW_METHODS, _scene, order=("roo
                              scene_columns=scene_columns, reference=f"{__name__}:ROW_EXPERIMENTS")
 
 
-def task_key(case: RowCase, method: str, config: RowConfig) -> str:
-    return runner.task_key(case, method, config)
-
-
-def run_row_task(case: RowCase, method: str, config: RowConfig, cache_dir=None) -> pd.DataFrame:
-    """The rows of one (case, method), from the cache when present; written to it otherwise."""
-    return runner.run_task(ROW_EXPERIMENTS, case, method, config, cache_dir)
-
-
 def run_row_experiments(cases, methods=ALL_METHODS, config: RowConfig | None = None, cache_dir=None, workers: int = 1,
                         progress: bool = True, scheduler=None) -> pd.DataFrame:
     """Every (case, method) task (:func:`tpvp.experiments.runner.run_experiments`); the raw table.
