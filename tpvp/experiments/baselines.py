@@ -61,6 +61,13 @@ def _check_config(config) -> PlantConfig:
     return config
 
 
+def _plant_case(scene, config) -> tuple:
+    """``(config, view space, plant centre (the origin), initial view index)``, config checked."""
+    config = _check_config(config)
+    space = scene.view_space
+    return config, space, np.zeros(3), space.view_index(config.initial_view)
+
+
 def _check_max_views(max_views) -> int:
     if isinstance(max_views, (bool, np.bool_)) or not isinstance(max_views, (int, np.integer)) or max_views < 1:
         raise ConfigError(f"max_views must be an integer >= 1, got {max_views!r}")
@@ -91,11 +98,8 @@ def nbv_curve(scene, config: PlantConfig = PlantConfig(), max_views: int = 20) -
     into this view) and ``radius`` (the obstacle radius of that move, from the points observed
     before it; 0 when nothing was observed yet).
     """
-    config = _check_config(config)
+    config, space, centre, initial = _plant_case(scene, config)
     max_views = _check_max_views(max_views)
-    space = scene.view_space
-    centre = np.zeros(3)
-    initial = space.view_index(config.initial_view)
     truth = sparse.csr_matrix(scene.truth_visibility)
     n_steps = min(max_views, len(space))
     is_oracle = np.zeros(truth.shape[1], dtype=bool)
@@ -142,11 +146,8 @@ def optimum(scene, config: PlantConfig = PlantConfig(), targets=(1.0, 0.98)) -> 
     Solver settings: ``config.selection.set_cover`` (solver, time limit, threads) for both ILPs and
     ``config.path`` for the path.
     """
-    config = _check_config(config)
+    config, space, centre, initial = _plant_case(scene, config)
     targets = _check_targets(targets)
-    space = scene.view_space
-    centre = np.zeros(3)
-    initial = space.view_index(config.initial_view)
     oracle = np.asarray(scene.oracle)
     if oracle.size == 0:
         raise ConfigError("the scene's oracle is empty: no view sees the plant")
