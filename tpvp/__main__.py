@@ -1,13 +1,18 @@
 """``python -m tpvp``: the command line, after checking that this Python has the dependencies.
 
 Run with a Python that lacks them (the system ``python3`` instead of ``.venv``), it prints one line
-naming the missing package and the fix, and exits with status 2 instead of a traceback.
-:func:`run_checked` is shared with ``python -m data_tools``.
+naming the missing package and the fix, and exits with status 2 instead of a traceback. Ctrl-C
+or SIGTERM at any moment ends it with one line and exit status 130: while the libraries load, at
+once (nothing has been written yet); afterwards as a ``KeyboardInterrupt`` that the run's staged
+outputs clean up after (docs/cli.md: exit status). :func:`run_checked` is shared with
+``python -m data_tools``; the ``tpvp`` command is :func:`main`.
 """
 
 import importlib.util
 import os
+import signal
 import sys
+import threading
 from pathlib import Path
 
 #: Import name -> distribution name (environment.txt) of the packages every command needs.
@@ -53,22 +58,100 @@ def missing_message(prog: str, name: str, more: int = 0) -> str:
     return f"{prog}: missing package {label}{extra} in {sys.executable}: {_fix()}"
 
 
+_STOPS = (signal.SIGINT, signal.SIGTERM)
+
+
+def _stop_at_once(prog: str):
+    """Start-up handler: nothing is written yet, so end at once. An interrupted C extension import
+    (open3d, numba) would otherwise surface as a traceback or a misleading ``ImportError``."""
+    def handler(signum, frame):
+        os.write(2, f"{prog}: interrupted while starting; nothing was written\n".encode())
+        os._exit(130)
+    return handler
+
+
+def _interrupt(received: list):
+    """Run handler: a ``KeyboardInterrupt`` in this process (so staged outputs are cleaned up),
+    for SIGTERM as for Ctrl-C; ``received`` remembers it."""
+    pid = os.getpid()
+
+    def handler(signum, frame):
+        if os.getpid() != pid:  # a forked child: the default action
+            signal.signal(signum, signal.SIG_DFL)
+            os.kill(os.getpid(), signum)
+            return
+        received.append(signum)
+        raise KeyboardInterrupt
+    return handler
+
+
+def _redeliver(received: list, previous_hook):
+    """``sys.unraisablehook`` that raises a signal again whose ``KeyboardInterrupt`` was swallowed
+    (raised inside a C callback, e.g. numba's cache loading through ctypes), instead of printing
+    "Exception ignored" and running on."""
+    def hook(unraisable):
+        if isinstance(unraisable.exc_value, KeyboardInterrupt) and received:
+            signal.raise_signal(received[-1])  # handled again once back in Python code
+            return
+        previous_hook(unraisable)
+    return hook
+
+
 def run_checked(prog: str, load_main) -> int:
     """Check the dependencies, then ``load_main()()`` (``load_main`` imports and returns the CLI's
-    ``main``); a missing package, found up front or at import time, is one line and status 2."""
-    missing = missing_packages()
-    if missing:
-        print(missing_message(prog, missing[0], len(missing) - 1), file=sys.stderr)
-        return 2
+    ``main``); a missing package, found up front or at import time, is one line and status 2; a
+    Ctrl-C or SIGTERM, one line and status 130."""
+    previous = {signum: signal.getsignal(signum) for signum in _STOPS}
+    previous_hook = sys.unraisablehook
+    in_main_thread = threading.current_thread() is threading.main_thread()  # only it may set handlers
     try:
-        main = load_main()
-        return main()
-    except ModuleNotFoundError as exc:
-        top = (exc.name or "").split(".")[0]
-        if not top or top in _OWN:
-            raise  # a bug in this project, not a missing dependency
-        print(missing_message(prog, top), file=sys.stderr)
-        return 2
+        if in_main_thread:
+            for signum in _STOPS:
+                signal.signal(signum, _stop_at_once(prog))
+        missing = missing_packages()
+        if missing:
+            print(missing_message(prog, missing[0], len(missing) - 1), file=sys.stderr)
+            return 2
+        try:
+            main = load_main()
+        except ModuleNotFoundError as exc:
+            top = (exc.name or "").split(".")[0]
+            if not top or top in _OWN:
+                raise  # a bug in this project, not a missing dependency
+            print(missing_message(prog, top), file=sys.stderr)
+            return 2
+        received = []
+        if in_main_thread:
+            for signum in _STOPS:
+                signal.signal(signum, _interrupt(received))
+            sys.unraisablehook = _redeliver(received, previous_hook)
+        try:
+            return main()
+        except KeyboardInterrupt as exc:  # one the command did not report itself (e.g. while parsing)
+            report = exc.report() if hasattr(exc, "report") else "interrupted; nothing was written"
+            print(f"{prog}: {report}", file=sys.stderr)
+            return 130
+        except Exception:
+            if not received:
+                raise
+            # Ctrl-C inside an import or a C extension surfaces as another exception (open3d:
+            # "ImportError: initialization failed") and leaves that extension half set up; its
+            # teardown at exit would print and change the status, so end here (the staged
+            # outputs were cleaned up on the way out).
+            print(f"{prog}: interrupted; nothing was published", file=sys.stderr)
+            sys.stdout.flush()
+            sys.stderr.flush()
+            os._exit(130)
+    finally:
+        if in_main_thread:
+            for signum, handler in previous.items():
+                signal.signal(signum, handler)
+            sys.unraisablehook = previous_hook
+
+
+def main() -> int:
+    """The ``tpvp`` command."""
+    return run_checked("tpvp", _load_main)
 
 
 def _load_main():
@@ -78,4 +161,4 @@ def _load_main():
 
 
 if __name__ == "__main__":
-    sys.exit(run_checked("tpvp", _load_main))
+    sys.exit(main())

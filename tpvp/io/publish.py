@@ -16,6 +16,11 @@ experiment runners' caches) goes through :func:`staged_folder`:
 A reader therefore sees the destination wholly old or wholly new. Nothing the command did not write
 is deleted: a run folder may only replace a folder that is empty or holds a previous tpvp run's
 files and nothing else (``.tpvp-run.json`` lists them); inputs inside the destination are refused.
+
+A mount point cannot be renamed, so a destination that is one is published *in place*: the lock,
+the staging folder and the backup live inside it (``.tpvp-*``), and the commit swaps its entries
+rather than the folder, under a journal (``.tpvp-commit-<pid>``) that lets the next run roll a cut
+commit back or forward. A read-only file system is refused before any work.
 """
 
 from __future__ import annotations
@@ -82,8 +87,40 @@ class Stage:
         return self.destination / relative
 
 
+_KINDS = ("lock", "staging-", "old-", "commit-")  # what a run keeps beside (or in) its destination
+
+
+def _in_place(destination: Path) -> bool:
+    """Whether ``destination`` is published in place (a mount point: it cannot be renamed)."""
+    return destination.is_dir() and os.path.ismount(destination)
+
+
 def _sibling(destination: Path, kind: str) -> Path:
+    """Where the run keeps its ``kind`` (lock, staging-<pid>, old-<pid>, commit-<pid>): beside the
+    destination, or inside it when it is published in place."""
+    if _in_place(destination):
+        return destination / f".tpvp-{kind}"
     return destination.parent / f".{destination.name}.tpvp-{kind}"
+
+
+def _internal(name: str) -> bool:
+    """Entries of an in-place destination that belong to the publishing (or to the file system)."""
+    return name.startswith(tuple(f".tpvp-{kind}" for kind in _KINDS)) or name == "lost+found"
+
+
+def _check_writable(destination: Path, what: str) -> None:
+    """Refuse a read-only file system before any work: the destination itself when it is published
+    in place, else the folder that will hold it (its nearest existing parent)."""
+    probe = destination if _in_place(destination) else destination.parent
+    while not probe.exists() and probe != probe.parent:
+        probe = probe.parent
+    try:
+        read_only = bool(os.statvfs(probe).f_flag & os.ST_RDONLY)
+    except OSError:
+        return  # unknown: the lock's creation reports it
+    if read_only:
+        raise OutputWriteError(f"cannot write {what} {destination}: {probe} is on a read-only file system; "
+                               f"choose a folder on a writable disk")
 
 
 def _lock(destination: Path, what: str) -> int:
@@ -106,7 +143,11 @@ def _lock(destination: Path, what: str) -> int:
 def _recover(destination: Path) -> None:
     """Repair what a crashed run left (we hold the lock, so every staging folder is stale): a
     backup without its destination is a commit cut between its two renames - roll it back; a
-    backup beside its destination is a finished commit - drop it."""
+    backup beside its destination is a finished commit - drop it. In place, a commit's journal says
+    which half was cut: moving the old entries out (roll back) or the new ones in (roll forward)."""
+    if _in_place(destination):
+        _recover_in_place(destination)
+        return
     for old in destination.parent.glob(f".{destination.name}.tpvp-old-*"):
         if destination.exists():
             shutil.rmtree(old, ignore_errors=True)
@@ -114,6 +155,25 @@ def _recover(destination: Path) -> None:
             os.rename(old, destination)
     for staging in destination.parent.glob(f".{destination.name}.tpvp-staging-*"):
         shutil.rmtree(staging, ignore_errors=True)
+
+
+def _move_entries(source: Path, target: Path) -> None:
+    for entry in sorted(os.listdir(source)):
+        os.rename(source / entry, target / entry)
+
+
+def _recover_in_place(destination: Path) -> None:
+    for journal in destination.glob(".tpvp-commit-*"):
+        pid = journal.name.rsplit("-", 1)[1]
+        old, staging = _sibling(destination, f"old-{pid}"), _sibling(destination, f"staging-{pid}")
+        with contextlib.suppress(OSError):
+            if journal.read_text().strip() == "new":
+                _move_entries(staging, destination)  # the new run was moving in: finish it
+            else:
+                _move_entries(old, destination)  # the old run was moving out: bring it back
+        journal.unlink()
+    for leftover in [*destination.glob(".tpvp-old-*"), *destination.glob(".tpvp-staging-*")]:
+        shutil.rmtree(leftover, ignore_errors=True)
 
 
 def _check_inputs(destination: Path, inputs, what: str) -> None:
@@ -131,8 +191,9 @@ def _check_inputs(destination: Path, inputs, what: str) -> None:
                           f"choose a new subfolder, e.g. {Path(destination) / 'run'}")
 
 
-def _run_files(folder: Path) -> set[str]:
-    return {p.relative_to(folder).as_posix() for p in folder.rglob("*") if not p.is_dir()}
+def _run_files(folder: Path, in_place: bool = False) -> set[str]:
+    files = {p.relative_to(folder).as_posix() for p in folder.rglob("*") if not p.is_dir()}
+    return {f for f in files if not _internal(f.split("/", 1)[0])} if in_place else files
 
 
 def _check_replaceable(destination: Path, what: str) -> None:
@@ -141,7 +202,7 @@ def _check_replaceable(destination: Path, what: str) -> None:
         return
     if not destination.is_dir():
         raise ConfigError(f"{what} {destination} exists and is not a folder")
-    present = _run_files(destination)
+    present = _run_files(destination, _in_place(destination))
     if not present:
         return
     marker = destination / RUN_MARKER
@@ -158,9 +219,13 @@ def _check_replaceable(destination: Path, what: str) -> None:
 
 
 def _link_tree(source: Path, target: Path) -> None:
-    """Hard-link every file of ``source`` into ``target`` (copy where links are not possible)."""
+    """Hard-link every file of ``source`` into ``target`` (copy where links are not possible);
+    in place, not the publishing's own entries."""
+    in_place = _in_place(source)
     for item in source.rglob("*"):
         relative = item.relative_to(source)
+        if in_place and _internal(relative.parts[0]):
+            continue
         if item.is_dir() and not item.is_symlink():
             (target / relative).mkdir(parents=True, exist_ok=True)
             continue
@@ -178,6 +243,9 @@ def _commit(stage: Stage, keep_existing: bool) -> None:
         payload = {"files": files, "written_utc": datetime.now(timezone.utc).isoformat(timespec="seconds")}
         (staging / RUN_MARKER).write_text(json.dumps(payload, indent=1) + "\n")
     fsync_path(staging)
+    if _in_place(destination):
+        _commit_in_place(stage)
+        return
     old = _sibling(destination, f"old-{os.getpid()}")
     with _signals_held():
         faults.checkpoint("commit")
@@ -188,6 +256,28 @@ def _commit(stage: Stage, keep_existing: bool) -> None:
         stage.published = True
         fsync_path(destination.parent)
         shutil.rmtree(old, ignore_errors=True)  # still held: no backup is left behind
+
+
+def _commit_in_place(stage: Stage) -> None:
+    """Swap the entries of a destination that cannot be renamed, under a journal that
+    :func:`_recover_in_place` reads after a crash."""
+    destination, staging, pid = stage.destination, stage.folder, os.getpid()
+    old, journal = _sibling(destination, f"old-{pid}"), _sibling(destination, f"commit-{pid}")
+    with _signals_held():
+        faults.checkpoint("commit")
+        old.mkdir()
+        journal.write_text("old\n")
+        for entry in sorted(os.listdir(destination)):
+            if not _internal(entry):
+                os.rename(destination / entry, old / entry)
+        faults.checkpoint("swap")
+        journal.write_text("new\n")
+        _move_entries(staging, destination)
+        stage.published = True
+        fsync_path(destination)
+        journal.unlink()
+        shutil.rmtree(old, ignore_errors=True)
+        staging.rmdir()
 
 
 @contextlib.contextmanager
@@ -214,6 +304,7 @@ def staged_folder(destination, *, keep_existing: bool = False, inputs=(), what: 
     exit; on an error or Ctrl-C the destination is left as it was. See the module docstring."""
     destination = Path(destination).absolute()
     _check_inputs(destination, inputs, what)
+    _check_writable(destination, what)
     try:
         destination.parent.mkdir(parents=True, exist_ok=True)
     except OSError as exc:

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from tpvp.io.atomic import atomic_path
+from tpvp.io.atomic import atomic_write_bytes
 from tpvp.sensor.camera import D435, look_at_rotation
 
 #: Points logged per cloud at most: larger clouds (multi-million-point scans at full resolution)
@@ -39,35 +39,37 @@ def write_recording(path, clouds: dict, cameras: dict | None = None, paths: dict
 
     path = Path(path)
     recording = rr.RecordingStream(application)
-    with atomic_path(path) as tmp:
-        recording.save(str(tmp))
-        recording.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
-        notes = []
-        for name, (points, colour) in clouds.items():
-            points, total = display_points(points)
-            if len(points) < total:
-                notes.append(f"- `world/{name}`: {len(points):,} of {total:,} points shown "
-                             f"(uniform random subsample for display, seed 0)")
-            recording.log(f"world/{name}", rr.Points3D(points, colors=colour, radii=0.0008), static=True)
-        if notes:
-            recording.log("notes/display", rr.TextDocument(
-                f"Clouds of more than {MAX_DISPLAY_POINTS:,} points are subsampled for display:\n\n"
-                + "\n".join(notes), media_type=rr.MediaType.MARKDOWN), static=True)
-        for group, (positions, look_ats) in (cameras or {}).items():
-            positions = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
-            look_ats = np.broadcast_to(np.asarray(look_ats, dtype=np.float64).reshape(-1, 3), positions.shape)
-            for i, (p, t) in enumerate(zip(positions, look_ats)):
-                entity = f"world/{group}/{i:03d}"
-                recording.log(entity, rr.Transform3D(translation=p, mat3x3=look_at_rotation(p, t)), static=True)
-                recording.log(entity, rr.Pinhole(focal_length=[D435.fx, D435.fy],
-                                                 principal_point=[D435.cx, D435.cy],
-                                                 width=D435.width, height=D435.height,
-                                                 camera_xyz=rr.ViewCoordinates.RDF,
-                                                 image_plane_distance=0.03), static=True)
-        for name, polyline in (paths or {}).items():
-            recording.log(f"world/{name}", rr.LineStrips3D([np.asarray(polyline, dtype=np.float32)],
-                                                           colors=(path_colours or {}).get(name, (128, 0, 160))),
-                          static=True)
-        recording.flush()
-        recording.disconnect()
-    return path
+    # Recorded in memory, then written by the atomic writer like every other output: rerun's own
+    # file sink waits forever on a full disk instead of raising.
+    memory = recording.memory_recording()
+    recording.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+    notes = []
+    for name, (points, colour) in clouds.items():
+        points, total = display_points(points)
+        if len(points) < total:
+            notes.append(f"- `world/{name}`: {len(points):,} of {total:,} points shown "
+                         f"(uniform random subsample for display, seed 0)")
+        recording.log(f"world/{name}", rr.Points3D(points, colors=colour, radii=0.0008), static=True)
+    if notes:
+        recording.log("notes/display", rr.TextDocument(
+            f"Clouds of more than {MAX_DISPLAY_POINTS:,} points are subsampled for display:\n\n"
+            + "\n".join(notes), media_type=rr.MediaType.MARKDOWN), static=True)
+    for group, (positions, look_ats) in (cameras or {}).items():
+        positions = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
+        look_ats = np.broadcast_to(np.asarray(look_ats, dtype=np.float64).reshape(-1, 3), positions.shape)
+        for i, (p, t) in enumerate(zip(positions, look_ats)):
+            entity = f"world/{group}/{i:03d}"
+            recording.log(entity, rr.Transform3D(translation=p, mat3x3=look_at_rotation(p, t)), static=True)
+            recording.log(entity, rr.Pinhole(focal_length=[D435.fx, D435.fy],
+                                             principal_point=[D435.cx, D435.cy],
+                                             width=D435.width, height=D435.height,
+                                             camera_xyz=rr.ViewCoordinates.RDF,
+                                             image_plane_distance=0.03), static=True)
+    for name, polyline in (paths or {}).items():
+        recording.log(f"world/{name}", rr.LineStrips3D([np.asarray(polyline, dtype=np.float32)],
+                                                       colors=(path_colours or {}).get(name, (128, 0, 160))),
+                      static=True)
+    recording.flush()
+    data = memory.drain_as_bytes()
+    recording.disconnect()
+    return atomic_write_bytes(path, data)
