@@ -116,19 +116,35 @@ def _recover(destination: Path) -> None:
         shutil.rmtree(staging, ignore_errors=True)
 
 
-def _check_inputs(destination: Path, inputs, what: str) -> None:
-    """Refuse a destination that holds an input, lies inside an input folder, or is the folder the
-    process runs in (replacing it would pull the shell's working folder away)."""
-    dest = destination.resolve()
+def check_outputs_outside_inputs(destination, inputs, what: str = "output folder") -> None:
+    """Refuse an output ``destination`` that is an input, lies inside an input folder or holds an
+    input (paths resolved: a symbolic link counts as what it points to), or is the folder the
+    process runs in (replacing it would pull the shell's working folder away). Raises a one-line
+    :class:`ConfigError` naming both and saying what to do; reads and writes nothing, so commands
+    call it before any work. ``None`` inputs are skipped. :func:`staged_folder` calls it too."""
+    dest = Path(destination).resolve()
     for item in inputs:
+        if item is None:
+            continue
         src = Path(item).resolve()
-        if src == dest or dest in src.parents or src in dest.parents and src.is_dir():
-            raise ConfigError(f"{what} {destination} would overwrite or write inside the input {item}; "
-                              f"choose a folder outside the inputs")
+        if src == dest:
+            problem, fix = f"is the input {item}", f"choose another {what} outside {item}"
+        elif dest in src.parents:
+            problem, fix = f"holds the input {item}", f"choose another {what} that does not hold it, or move the input out"
+        elif src in dest.parents:
+            problem, fix = f"lies inside the input {item}", f"choose another {what} outside {item}"
+        else:
+            continue
+        given = (Path(os.path.abspath(destination)), Path(os.path.abspath(item)))
+        linked = f" (after following symbolic links: {dest} and {src})" if given != (dest, src) else ""
+        raise ConfigError(f"{what} {destination} {problem}{linked}; inputs are only read: {fix}")
     cwd = Path.cwd().resolve()
     if cwd == dest or dest in cwd.parents:
         raise ConfigError(f"{what} {destination} is the folder you are working in (or holds it); "
                           f"choose a new subfolder, e.g. {Path(destination) / 'run'}")
+
+
+_check_inputs = check_outputs_outside_inputs
 
 
 def _run_files(folder: Path) -> set[str]:
