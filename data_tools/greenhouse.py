@@ -39,7 +39,7 @@ from data_tools.cleaning import CleanConfig, clean_scan, voxel_downsample
 from data_tools.errors import ConfigError, DatasetError, InputFileError, PointCloudError
 from data_tools.manifest import read_table, stage_table
 from tpvp.io import READ_EXTENSIONS, atomic_write_bytes, atomic_write_text, cloud_extension, read_point_cloud, write_point_cloud
-from tpvp.io.publish import staged_folder
+from tpvp.io.publish import check_outputs_outside_inputs, staged_folder
 from tpvp.scene.boxes import DATA_DIR as BUNDLED_CONFIG_DIR
 from tpvp.scene.boxes import OrientedBox, read_bbx_config
 from tpvp.viz import plot_row_sessions
@@ -138,14 +138,14 @@ def _session_match(relative: str):
     return matches[-1] if matches else None
 
 
-def find_sessions(source, *, manifest=None, landmarks=None, exclude=None) -> Discovery:
+def find_sessions(source, *, manifest=None, landmarks=None) -> Discovery:
     """Find the session scans in ``source`` (a folder), or those listed in ``manifest`` (a CSV).
 
     A scan's room and date are read from its name or, failing that, its folders
     (``room1/20250918/scan.ply``). ``landmarks``: a folder of landmark files named like the
-    sessions (``room1_20250918*.csv``). ``exclude``: a folder to ignore (the output of an earlier
-    run). When a session has several files, the processed model is kept (then point clouds before
-    meshes); the others are reported as skipped.
+    sessions (``room1_20250918*.csv``), skipped when it lies inside ``source``. When a session
+    has several files, the processed model is kept (then point clouds before meshes); the others
+    are reported as skipped.
     """
     landmarks_dir = Path(landmarks) if landmarks is not None else None
     if landmarks_dir is not None and not landmarks_dir.is_dir():
@@ -156,7 +156,7 @@ def find_sessions(source, *, manifest=None, landmarks=None, exclude=None) -> Dis
     if not source.is_dir():
         raise InputFileError(f"{source}: folder not found" if not source.exists() else
                              f"{source}: not a folder (pass the folder holding the session scans, or --manifest)")
-    ignored = [p.resolve() for p in (landmarks_dir, exclude) if p is not None]
+    ignored = [landmarks_dir.resolve()] if landmarks_dir is not None else []
     candidates: dict[tuple[str, dt.date], list[Path]] = {}
     skipped = []
     for path in sorted(p for p in source.rglob("*") if p.is_file()):
@@ -296,13 +296,6 @@ def process_session(scan: SessionScan, points: np.ndarray, reference: np.ndarray
     return result.points, alignment, result.counts
 
 
-def _refuse_output_over_input(output: Path, inputs: list[Path]) -> None:
-    for item in inputs:
-        if output.resolve() == item.resolve() or output.resolve() in item.resolve().parents:
-            raise ConfigError(f"{output}: the output folder holds the input {item}; raw data is never "
-                              "modified - choose another --output")
-
-
 def clean_greenhouse(source=None, output="data/greenhouse", *, manifest=None, landmarks=None,
                      config_dir=None, units: str = "m", clean: CleanConfig = CleanConfig(),
                      icp: IcpConfig = IcpConfig(), force: bool = False, progress: bool = True,
@@ -313,16 +306,19 @@ def clean_greenhouse(source=None, output="data/greenhouse", *, manifest=None, la
     Refuses to replace an existing dataset's manifest without ``force``. The output is a whole new
     dataset (``staged_folder`` without ``keep_existing``): with ``force`` it replaces the previous
     one, files of sessions no longer found included, so old and new sessions never mix. An output
-    folder inside the source is allowed (it is skipped when looking for scans); one that holds or is
-    an input is refused.
+    that is, holds or lies inside an input is refused before anything is read: the inputs are
+    ``source`` (the folder, not only the scans found in it: a later clean of it would read this
+    output as raw scans), ``manifest`` and every file it lists, the ``landmarks`` and ``config_dir``
+    folders and the landmark and box files used.
     """
     from tqdm.auto import tqdm
 
     output = Path(output)
-    if manifest is None and source is not None:
-        _refuse_output_over_input(output, [Path(source)])
-    found = find_sessions(source, manifest=manifest, landmarks=landmarks, exclude=output)
-    _refuse_output_over_input(output, [scan.path for scan in found.sessions])
+    given = [source if manifest is None else None, manifest, landmarks, config_dir]
+    check_outputs_outside_inputs(output, given, "dataset")  # before the (long) search and cleaning
+    found = find_sessions(source, manifest=manifest, landmarks=landmarks)
+    inputs = given + [scan.path for scan in found.sessions] + [scan.landmarks for scan in found.sessions]
+    check_outputs_outside_inputs(output, inputs, "dataset")  # a manifest's scans may lie anywhere
     sites = sorted({s.site for s in found.sessions})
     boxes = {}
     for site in sites:
@@ -330,8 +326,7 @@ def clean_greenhouse(source=None, output="data/greenhouse", *, manifest=None, la
         if boxes[site][0] is None:
             raise InputFileError(f"no plant box for site {site!r}: put {site}_bbx_config.yaml in a folder "
                                  "and pass it with --config (format: tpvp/data/greenhouse_row/room1_bbx_config.yaml)")
-    inputs = [scan.path for scan in found.sessions] + [scan.landmarks for scan in found.sessions if scan.landmarks]
-    inputs += [path for _, path in boxes.values()] + ([Path(manifest)] if manifest is not None else [])
+    inputs += [path for _, path in boxes.values()]
     rows = []
     with staged_folder(output, inputs=inputs, what="dataset") as stage:
         # Under the dataset's lock: no other run can write it between this check and the commit.

@@ -33,7 +33,7 @@ from data_tools.download import download_file, verify_zip
 from data_tools.errors import ConfigError, DatasetError, InputFileError, TpvpError
 from data_tools.manifest import stage_table
 from tpvp.io import atomic_write_bytes, atomic_write_text, read_point_cloud, write_point_cloud
-from tpvp.io.publish import staged_folder
+from tpvp.io.publish import check_outputs_outside_inputs, staged_folder
 from tpvp.scene.normalise import normalise_plant
 from tpvp.scene.voxels import voxel_centres
 
@@ -334,7 +334,8 @@ def prepare_pheno4d(source=None, output="data/pheno4d", config: Pheno4DConfig = 
     ``output`` and published in one step (:func:`tpvp.io.publish.staged_folder`). The output is a
     whole new dataset: ``force`` replaces the previous one (files of plants no longer in the source
     included, so two preparations never mix); a concurrent run on the same output is refused at once
-    (exit status 3), an output that is, holds or lies inside the source is refused, and an error or
+    (exit status 3), an output that is, holds or lies inside the source is refused before anything
+    is read, and an error or
     Ctrl-C leaves the output wholly old or wholly new. Returns the manifest; its
     ``attrs`` hold ``"pairs"`` (DataFrame) and ``"skipped"`` (list of (name, reason)).
     """
@@ -353,10 +354,11 @@ def prepare_pheno4d(source=None, output="data/pheno4d", config: Pheno4DConfig = 
         archive_path = None
         inputs = [r.source for r in records]
     else:
+        inputs = [source]
+        check_outputs_outside_inputs(output, inputs, "dataset")  # before listing and reading the source
         records, skipped = find_scans(source, year=config.year)
         shown = {r.source: r.source for r in records}
         archive_path = Path(source) if Path(source).is_file() else None
-        inputs = [source]
 
     rows = []
     with staged_folder(output, inputs=inputs, what="dataset") as stage, contextlib.ExitStack() as stack:

@@ -3,8 +3,13 @@
 The scan is aligned to the site's reference day (landmarks + ICP on the static structure kept in
 ``reference/<site>_static.pcd``), cropped and cleaned like every other session
 (:mod:`data_tools.greenhouse`), then written into the dataset and appended to its manifest. The raw
-scan is only read (a scan inside the dataset is refused). An existing session is replaced only with
-``force``.
+scan is only read. An existing session is replaced only with ``force``.
+
+The dataset is both read and written (``keep_existing``), but the user's files are not part of it:
+a dataset that is, holds or lies inside the scan or the landmarks file is refused before anything
+is read. A scan kept inside the dataset would be mixed with the files the tools wrote there (and
+overwritten when it sits where its own session's model goes), so it must stay outside; a dataset
+merely beside the scan, in the same folder, is fine: this command reads only the files it is given.
 
 The dataset is updated through :func:`tpvp.io.publish.staged_folder` with ``keep_existing=True``:
 the run adds or replaces its session's files in a hard-linked copy of the dataset, which then
@@ -27,10 +32,9 @@ import pandas as pd
 
 from data_tools.alignment import IcpConfig, read_landmarks
 from data_tools.cleaning import CleanConfig
-from data_tools.errors import ConfigError, DatasetError, InputFileError, PointCloudError
+from data_tools.errors import DatasetError, InputFileError, PointCloudError
 from data_tools.greenhouse import (
     MANIFEST_COLUMNS,
-    PROCESSED_FOLDER,
     SessionScan,
     check_site,
     parse_date,
@@ -44,7 +48,7 @@ from data_tools.greenhouse import (
 )
 from data_tools.manifest import read_table, record_written, stage_table
 from tpvp.io import read_point_cloud
-from tpvp.io.publish import staged_folder
+from tpvp.io.publish import check_outputs_outside_inputs, staged_folder
 
 #: A new scan whose extent differs from the reference day's by more than this factor has wrong units.
 UNITS_RATIO_LIMIT = 20.0
@@ -85,15 +89,13 @@ def prepare_session(dataset, site: str, date, scan, *, landmarks=None, units: st
     landmarks = Path(landmarks) if landmarks is not None else None
     if not scan.is_file():
         raise InputFileError(f"{scan}: scan not found")
-    if scan.resolve().parent.parent == dataset.resolve() and scan.parent.name in ("reference", PROCESSED_FOLDER):
-        raise ConfigError(f"{scan}: a file of the dataset itself; raw scans are never modified - "
-                          "prepare a scan from outside the dataset")
+    inputs = [scan, landmarks]
+    check_outputs_outside_inputs(dataset, inputs, "dataset")
     # The inputs are read before the dataset is locked: their errors name them and cost no lock time.
     points = read_point_cloud(scan, units=units)
     if landmarks is not None:
         read_landmarks(landmarks)
     session = SessionScan(site, date, scan, landmarks)
-    inputs = [scan] + ([landmarks] if landmarks is not None else [])
     with staged_folder(dataset, keep_existing=True, inputs=inputs, what="dataset") as stage:
         row = _add_session(stage, session, points, units, clean, icp, force)
     return row

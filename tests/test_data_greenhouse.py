@@ -274,16 +274,16 @@ def test_scans_in_millimetres_clean_with_units_mm(tmp_path):
     assert table["extent_z"].iloc[0] < 2.4
 
 
-def test_output_inside_the_source_is_ignored_and_never_overwrites_input(tmp_path):
+def test_output_inside_the_source_is_refused_before_anything_is_written(tmp_path):
+    # An output inside the raw folder used to be accepted: a later clean of that folder would read
+    # the dataset's Processed_3D_Model as raw scans (tests/test_data_outputs.py covers every command).
     folder = write_processed_standin(tmp_path / "kaggle", n_sessions=1)
-    inside = tmp_path / "kaggle" / "clean"
-    first = clean_greenhouse(tmp_path / "kaggle", inside, progress=False, log=quiet)
-    again = clean_greenhouse(tmp_path / "kaggle", inside, force=True, progress=False, log=quiet)
-    assert list(again["source"]) == list(first["source"]) == [str(folder / "room1_20250915.pcd")]
-    before = tree_digest(folder)
-    with pytest.raises(ConfigError, match="raw data is never modified"):
-        clean_greenhouse(tmp_path / "kaggle", tmp_path / "kaggle", force=True, progress=False, log=quiet)
-    assert tree_digest(folder) == before
+    before = tree_digest(tmp_path)
+    for output, why in ((tmp_path / "kaggle" / "clean", "lies inside the input"),
+                        (tmp_path / "kaggle", "is the input"), (folder, "lies inside the input")):
+        with pytest.raises(ConfigError, match=why):
+            clean_greenhouse(tmp_path / "kaggle", output, force=True, progress=False, log=quiet)
+    assert tree_digest(tmp_path) == before and not (tmp_path / "kaggle" / "clean").exists()
 
 
 def test_site_without_box_configuration(tmp_path):

@@ -82,7 +82,7 @@ def test_existing_session_needs_force(standin, dataset, capsys):
         prepare_session(dataset, "room1", "2025-09-15", standin.scans["20250915"], force=True)
     # The dataset's own model cannot be its own new raw scan (it would be overwritten).
     own = dataset / table["file"].iloc[1]
-    with pytest.raises(ConfigError, match="raw scans are never modified"):
+    with pytest.raises(ConfigError, match="holds the input .*inputs are only read"):
         prepare_session(dataset, "room1", "2025-09-18", own, force=True)
 
 

@@ -176,15 +176,28 @@ def _recover_in_place(destination: Path) -> None:
         shutil.rmtree(leftover, ignore_errors=True)
 
 
-def _check_inputs(destination: Path, inputs, what: str) -> None:
-    """Refuse a destination that holds an input, lies inside an input folder, or is the folder the
-    process runs in (replacing it would pull the shell's working folder away)."""
-    dest = destination.resolve()
+def check_outputs_outside_inputs(destination, inputs, what: str = "output folder") -> None:
+    """Refuse an output ``destination`` that is an input, lies inside an input folder or holds an
+    input (paths resolved: a symbolic link counts as what it points to), or is the folder the
+    process runs in (replacing it would pull the shell's working folder away). Raises a one-line
+    :class:`ConfigError` naming both and saying what to do; reads and writes nothing, so commands
+    call it before any work. ``None`` inputs are skipped. :func:`staged_folder` calls it too."""
+    dest = Path(destination).resolve()
     for item in inputs:
+        if item is None:
+            continue
         src = Path(item).resolve()
-        if src == dest or dest in src.parents or src in dest.parents and src.is_dir():
-            raise ConfigError(f"{what} {destination} would overwrite or write inside the input {item}; "
-                              f"choose a folder outside the inputs")
+        if src == dest:
+            problem, fix = f"is the input {item}", f"choose another {what} outside {item}"
+        elif dest in src.parents:
+            problem, fix = f"holds the input {item}", f"choose another {what} that does not hold it, or move the input out"
+        elif src in dest.parents:
+            problem, fix = f"lies inside the input {item}", f"choose another {what} outside {item}"
+        else:
+            continue
+        given = (Path(os.path.abspath(destination)), Path(os.path.abspath(item)))
+        linked = f" (after following symbolic links: {dest} and {src})" if given != (dest, src) else ""
+        raise ConfigError(f"{what} {destination} {problem}{linked}; inputs are only read: {fix}")
     cwd = Path.cwd().resolve()
     if cwd == dest or dest in cwd.parents:
         raise ConfigError(f"{what} {destination} is the folder you are working in (or holds it); "
@@ -303,7 +316,7 @@ def staged_folder(destination, *, keep_existing: bool = False, inputs=(), what: 
     """Lock ``destination``, yield a :class:`Stage` to write into, publish it all at once on normal
     exit; on an error or Ctrl-C the destination is left as it was. See the module docstring."""
     destination = Path(destination).absolute()
-    _check_inputs(destination, inputs, what)
+    check_outputs_outside_inputs(destination, inputs, what)
     _check_writable(destination, what)
     try:
         destination.parent.mkdir(parents=True, exist_ok=True)
