@@ -46,7 +46,8 @@ def _print_case(result, summary, folder, compile_seconds, pieces):
             ("path length", f"{result.path_length:.2f} m (planning frame; "
                             f"{summary['path_length_scan_m']:.3f} m in the scan frame)"),
             ("coverage after warm-up", f"{100 * result.coverage_warm_up:.2f} %"),
-            ("Chamfer transferred vs coarse", f"{summary['chamfer_before_mm']:.2f} -> {summary['chamfer_after_mm']:.2f} mm"),
+            ("Chamfer transferred vs coarse", f"{summary['chamfer_before_mm']:.2f} -> "
+                                              f"{summary['chamfer_after_mm']:.2f} mm (planning frame)"),
             ("view selection", f"{len(result.planned_views)} views, optimal={result.selection.optimal}"
              + (f", {result.set_cover.n_dropped_infeasible} unreachable voxels dropped"
                 if hasattr(result.set_cover, "n_dropped_infeasible") else f"; {result.selection.status}")),

@@ -111,15 +111,18 @@ def _unseen(config, space, sensor, per_metre: float) -> str:
     distance = np.linalg.norm(space.positions, axis=1) / per_metre
     if config.scene.scale == "native":
         frame = "--scale native: the plant at its true size"
+        fix = ("check the scans' units (--units) and the view sphere's radius (--radius M: metres around the "
+               "real plant)")
     else:
         frame = (f"--scale normalised: the plant scaled to a {config.scene.largest_side:g} m largest side "
                  f"at the origin")
+        fix = ("check the view space's radius and units (positions in metres), or move the views onto a "
+               "sphere around the plant with --radius (e.g. --radius 0.4)")
     near, far = distance.min(), distance.max()
     span = f"{near:.3g} m" if far - near <= 0.01 * far else f"{near:.3g}-{far:.3g} m"
     return (f"view space {config.view_space!r}: no candidate view sees the plant: its {len(space)} views are "
-            f"{span} from the plant's centre, the sensor sees {sensor.max_range / per_metre:.3g} m far ({frame}); "
-            f"check the view space's radius and units (positions in metres), or move the views onto a sphere "
-            f"around the plant with --radius (e.g. --radius 0.4)")
+            f"{span} from the centre of a plant {config.scene.largest_side / per_metre:.3g} m across, the sensor "
+            f"sees {sensor.max_range / per_metre:.3g} m far ({frame}); {fix}")
 
 
 def observation(scene: Scene, view: int) -> np.ndarray:
