@@ -13,7 +13,7 @@ import sys
 from pathlib import Path
 
 from data_tools.kaggle_download import KAGGLE_DATASET
-from tpvp.errors import run_command
+from tpvp.errors import install_warning_format, run_command
 from tpvp.errors import TpvpError
 
 
@@ -169,6 +169,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv=None) -> int:
+    install_warning_format("data_tools")
     args = build_parser().parse_args(argv)
     name = " ".join(x for x in (args.command, getattr(args, "action", None)) if x)
     return run_command(args, f"data_tools {name}")

@@ -12,7 +12,7 @@ from pathlib import Path
 
 from tpvp import __version__
 from tpvp.config import SCALES, UP_AXES, config_yaml, derived_table, load_config, parse_overrides
-from tpvp.errors import TpvpError, run_command
+from tpvp.errors import TpvpError, install_warning_format, run_command
 from tpvp.experiments import plants as plant_experiments
 from tpvp.experiments import rows as row_experiments
 from tpvp.experiments.frontier import coverage_frontier, write_frontier_files
@@ -22,9 +22,11 @@ from tpvp.experiments.render_demo import RenderDemoConfig, run_render_demo
 from tpvp.experiments.rows import QUICK, RowCase, dataset_cases
 from tpvp.experiments.single_plant import build_scene, run_case, transfer
 from tpvp.io import atomic_write_text, read_point_cloud
+from tpvp.io.units import plant_size_warning
 from tpvp.io.publish import staged_folder
 from tpvp.jit import compile_kernels, plant_pieces
 from tpvp.scene.boxes import ROOMS
+from tpvp.scene.normalise import check_session_pair
 from tpvp.scene.samples import load_sample
 from tpvp.viewspace import get_view_space, view_space_choices
 
@@ -44,7 +46,8 @@ def _print_case(result, summary, folder, compile_seconds, pieces):
             ("path length", f"{result.path_length:.2f} m (planning frame; "
                             f"{summary['path_length_scan_m']:.3f} m in the scan frame)"),
             ("coverage after warm-up", f"{100 * result.coverage_warm_up:.2f} %"),
-            ("Chamfer transferred vs coarse", f"{summary['chamfer_before_mm']:.2f} -> {summary['chamfer_after_mm']:.2f} mm"),
+            ("Chamfer transferred vs coarse", f"{summary['chamfer_before_mm']:.2f} -> "
+                                              f"{summary['chamfer_after_mm']:.2f} mm (planning frame)"),
             ("view selection", f"{len(result.planned_views)} views, optimal={result.selection.optimal}"
              + (f", {result.set_cover.n_dropped_infeasible} unreachable voxels dropped"
                 if hasattr(result.set_cover, "n_dropped_infeasible") else f"; {result.selection.status}")),
@@ -66,7 +69,7 @@ def _print_rows(rows, folder, files: str) -> None:
 
 def _print_warnings(warnings) -> None:
     for warning in warnings:
-        print(f"warning: {warning}", file=sys.stderr)
+        print(f"tpvp: warning: {warning}", file=sys.stderr)
 
 
 def _config(args):
@@ -153,8 +156,12 @@ def _plan(args) -> int:
     current, current_units = read_point_cloud(args.current, units=args.units, return_units=True,
                                               drop_invalid=args.drop_invalid)
     print(f"{args.previous.name}: units: {previous_units}; {args.current.name}: units: {current_units}")
+    names = (str(args.previous), str(args.current))
+    _print_warnings(warning for warning in (plant_size_warning(previous, previous_units, names[0]),
+                                            plant_size_warning(current, current_units, names[1])) if warning)
+    check_session_pair(previous, current, names, units=(previous_units, current_units))  # before any work
     return _run_pair(previous, current, args.output, config, name=args.current.name,
-                     inputs=(args.previous, args.current), names=(str(args.previous), str(args.current)),
+                     inputs=(args.previous, args.current), names=names,
                      frontier=args.frontier)
 
 
@@ -426,6 +433,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv=None) -> int:
+    install_warning_format("tpvp")  # every warning one line, no module path or source line
     parser = build_parser()
     args = parser.parse_args(argv)
     return run_command(args, f"tpvp {args.command}")

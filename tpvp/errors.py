@@ -43,6 +43,11 @@ class SensorError(TpvpError, ValueError):
     """A view cannot be rendered (camera inside the geometry, zero-length look-at, ...)."""
 
 
+class GraphTooLargeError(PointCloudError):
+    """A registration's deformation graph would exceed its node limit (``max_nodes``); the
+    pipeline adds the previous session's file name to the message."""
+
+
 def checked_cloud(points, name: str = "point cloud"):
     """``points`` as a float64 ``(N, 3)`` array; raises :class:`PointCloudError` naming ``name`` if
     it is not numeric, not ``(N, 3)``, empty or not finite."""
@@ -74,3 +79,22 @@ def run_command(args, name: str) -> int:
         report = exc.report() if hasattr(exc, "report") else "interrupted before any output was written"
         print(f"{name}: {report}", file=sys.stderr)
         return 130
+
+
+def install_warning_format(prog: str) -> None:
+    """Print every Python warning as one line ``<prog>: warning: <message>`` on stderr: no module
+    path, category or source line (a command line's user sees what to do, not where it was
+    raised). ``warnings.warn`` calls, their filters and ``pytest.warns`` work as before."""
+    import warnings
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        stream = sys.stderr if file is None else file
+        if stream is None:  # pythonw: no console
+            return
+        text = " ".join(str(message).split())  # one line whatever the message holds
+        try:
+            stream.write(f"{prog}: warning: {text}\n")
+        except OSError:  # a closed or broken stderr must not turn a warning into an error
+            pass
+
+    warnings.showwarning = show

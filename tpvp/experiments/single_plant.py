@@ -15,6 +15,7 @@ import numpy as np
 from scipy import sparse
 
 from tpvp.config import PlantConfig
+from tpvp.errors import GraphTooLargeError
 from tpvp.inflation import inflate
 from tpvp.nbv.warm_up import warm_up
 from tpvp.path.local import predicted_size
@@ -122,7 +123,10 @@ def transfer(scene: Scene, config: PlantConfig = PlantConfig(), progress=None) -
 
     t = time.perf_counter()
     say("registration")
-    alignment = register(scene.previous, coarse, config.registration)
+    try:
+        alignment = register(scene.previous, coarse, config.registration)
+    except GraphTooLargeError as exc:  # name the file: the registration knows arrays only
+        raise GraphTooLargeError(f"{scene.names[0]}: {exc}") from None
     timings["registration"] = time.perf_counter() - t
     return Transfer(nbv, list(nbv.executed), coarse, alignment, timings,
                     _registration_warnings(scene, alignment, config))
@@ -193,9 +197,13 @@ def _registration_warnings(scene: Scene, alignment, config: PlantConfig) -> list
     fraction = alignment.chamfer_after / size
     if fraction <= config.registration.warn_chamfer_fraction:
         return []
-    per_scan = 1e3 / scene.scan_scale
+    # Scan metres, in mm for a plant under a metre (as read with --units mm or auto), else in m
+    # (as read with --units m: the user sees the numbers of the files).
+    per_scan, unit = 1.0 / scene.scan_scale, "m"
+    if size * per_scan < 1.0:
+        per_scan, unit = 1e3 * per_scan, "mm"
     return [f"registration of {scene.names[0]} onto the coarse scan of {scene.names[1]} ends at "
-            f"{alignment.chamfer_after * per_scan:.3g} mm Chamfer ({100 * fraction:.1f} % of the plant's "
-            f"{size * per_scan:.3g} mm; a matching pair of sessions ends below "
+            f"{alignment.chamfer_after * per_scan:.3g} {unit} Chamfer ({100 * fraction:.1f} % of the plant's "
+            f"{size * per_scan:.3g} {unit}; a matching pair of sessions ends below "
             f"{100 * config.registration.warn_chamfer_fraction:g} %): are these two sessions of the same "
             f"plant? The plan relies on the aligned previous session"]

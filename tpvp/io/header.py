@@ -7,6 +7,7 @@ what it declares with :func:`check_trailing`.
 
 from __future__ import annotations
 
+import re
 from typing import Iterator, NamedTuple
 
 from tpvp.errors import InputFileError
@@ -20,6 +21,7 @@ class HeaderLine(NamedTuple):
     text: str | None  # stripped ASCII text; None when the line is not ASCII (binary data)
     end: int  # offset after the line and its newline: where the next line, or the data, starts
     last: bool  # the file ends on this line (no newline after it)
+    start: int = 0  # offset of the line's first byte
 
 
 def without_bom(data: bytes) -> bytes:
@@ -38,10 +40,33 @@ def header_lines(data: bytes) -> Iterator[HeaderLine]:
             text = data[pos:end].decode("ascii").strip()
         except UnicodeDecodeError:
             text = None
-        yield HeaderLine(number, text, len(data) if nl < 0 else nl + 1, nl < 0)
+        yield HeaderLine(number, text, len(data) if nl < 0 else nl + 1, nl < 0, pos)
         if nl < 0:
             return
         pos = nl + 1
+
+
+#: How far past a non-ASCII header line to look for the header's end line.
+_END_SEARCH = 1 << 20
+
+
+def not_ascii(path, data: bytes, header: HeaderLine, kind: str, end_line: bytes, end_name: str):
+    """The error for a header line that is not ASCII text (``header.text`` is None). When the
+    header's end line (``end_line``: a regular expression, e.g. ``rb"end_header\\r?"``) follows
+    within 1 MiB, the line is a damaged header line (typically a comment with an accented letter):
+    say which line, which byte and what to do. Otherwise binary data began before the header ended."""
+    end = re.compile(rb"(?m)^" + end_line + rb"$")
+    if not end.search(data[header.end:header.end + _END_SEARCH]):
+        return InputFileError(f"{path}: {kind} header has no {end_name} line (binary data at line "
+                              f"{header.number})")
+    raw = data[header.start:header.end].rstrip(b"\r\n")
+    column = next(i for i, b in enumerate(raw) if b > 0x7F) + 1
+    shown = raw.decode("utf-8", errors="backslashreplace")
+    shown = shown if len(shown) <= 50 else shown[:47] + "..."
+    return InputFileError(
+        f"{path}: line {header.number} of the {kind} header is not ASCII text (byte "
+        f"0x{raw[column - 1]:02x} at column {column}: '{shown}'); a {kind} header must be plain ASCII: "
+        f"replace that character (e.g. an accented letter in a comment) or export the scan again")
 
 
 #: Bytes a writer may leave after binary data (a final newline, NUL padding).

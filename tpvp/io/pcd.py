@@ -18,7 +18,7 @@ import numpy as np
 from tpvp.errors import InputFileError, PointCloudError
 from tpvp.io.fields import as_declared, int_labels, label_index, unique_names
 from tpvp.io.files import check_not_utf16, read_input_bytes
-from tpvp.io.header import check_trailing, header_lines, without_bom
+from tpvp.io.header import check_trailing, header_lines, not_ascii, without_bom
 from tpvp.io.lzf import LZF_MAX_RATIO, lzf_decompress
 from tpvp.io.text import locate_text_error
 
@@ -36,8 +36,7 @@ def _parse_pcd_header(path, data: bytes):
     for header in header_lines(data):
         line, lineno = header.text, header.number
         if line is None:
-            raise InputFileError(f"{path}: PCD header has no DATA line (binary data at line "
-                                 f"{lineno})")
+            raise not_ascii(path, data, header, "PCD", rb"(?i:DATA)[ \t][^\n]*", "DATA")
         if not line or line.startswith("#"):
             continue
         words = line.split()

@@ -17,7 +17,7 @@ import numpy as np
 from tpvp.errors import InputFileError, PointCloudError
 from tpvp.io.fields import as_declared, int_labels, label_index, unique_names
 from tpvp.io.files import check_not_utf16, read_input_bytes
-from tpvp.io.header import check_trailing, header_lines, without_bom
+from tpvp.io.header import check_trailing, header_lines, not_ascii, without_bom
 from tpvp.io.text import locate_text_error
 
 PLY_EXTENSIONS = (".ply",)
@@ -61,10 +61,11 @@ def _parse_ply_header(path, data: bytes):
         line, lineno = header.text, header.number
         if line == "end_header":
             break
-        if line is None or header.last:
+        if line is None:
+            raise not_ascii(path, data, header, "PLY", rb"end_header\r?", "'end_header'")
+        if header.last:
             raise InputFileError(f"{path}: PLY header has no 'end_header' line (the file ends "
-                                 f"inside the header, at line {lineno})" if line is not None else
-                                 f"{path}: PLY header has no 'end_header' line")
+                                 f"inside the header, at line {lineno})")
         words = line.split()
         key = words[0] if words else ""
         bad = False

@@ -140,7 +140,8 @@ class OccupancyMap:
                                   f"{len(views)} view positions")
             targets = [_as_position(t, f"look-at {i}") for i, t in enumerate(arr)]
         if sum(len(c) for c in clouds) == 0:
-            raise PointCloudError("no observed points: cannot size the occupancy map")
+            raise PointCloudError(f"no observed points: none of the {len(views)} views saw the plant, so the "
+                                  f"occupancy map cannot be sized; are the views within the sensor's range of it?")
         radius = max(observed_radius(centre, c) for c in clouds)
         if radius <= 0:
             raise PointCloudError("all observed points coincide with the map centre")

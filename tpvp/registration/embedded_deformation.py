@@ -73,10 +73,11 @@ import numpy as np
 from numba import njit
 from scipy.spatial import cKDTree
 
-from tpvp.errors import ConfigError, PointCloudError, checked_cloud
+from tpvp.errors import ConfigError, GraphTooLargeError, PointCloudError, checked_cloud
 from tpvp.io.units import MM_EXTENT_THRESHOLD
 from tpvp.metrics.geometry import chamfer_distance
 from tpvp.numba_tools import JIT
+from tpvp.registration.warp_field import too_many_nodes
 from tpvp.scene import voxels
 
 # Clouds whose largest sides differ by more than this factor are assumed to be in different units.
@@ -702,9 +703,9 @@ def register_embedded_deformation(P, Q, config: EDConfig | None = None, optimise
     start = time.perf_counter()
     nodes = voxels.voxel_centroids(P, config.node_coverage)
     if len(nodes) > config.max_nodes:
-        raise PointCloudError(
-            f"source cloud P gives {len(nodes)} graph nodes at node_coverage={config.node_coverage} m "
-            f"(limit max_nodes={config.max_nodes}); is P in metres?")
+        raise GraphTooLargeError(too_many_nodes(len(nodes), config.max_nodes, config.node_coverage,
+                                                "registration.embedded_deformation", "node_coverage",
+                                                "deformation-graph"))
     edge_idx, edge_w = _edges(nodes, config.k_edges)
     anchor_idx, anchor_w = _anchors(nodes, P, config)
     R, t, losses, terms = optimise(P, Q, nodes, edge_idx, edge_w, anchor_idx, anchor_w, config)

@@ -65,6 +65,7 @@ Departures from the reference (cilantro float32, OpenMP, Eigen):
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field
 
@@ -73,10 +74,22 @@ from scipy import sparse
 from scipy.sparse import linalg as splinalg
 from scipy.spatial import cKDTree
 
-from tpvp.errors import ConfigError, PointCloudError, checked_cloud
+from tpvp.errors import ConfigError, GraphTooLargeError, PointCloudError, checked_cloud
 from tpvp.io.units import MM_EXTENT_THRESHOLD
 from tpvp.metrics.geometry import chamfer_distance
 from tpvp.scene import voxels
+
+
+def too_many_nodes(nodes: int, limit: int, spacing: float, prefix: str, spacing_key: str, what: str) -> str:
+    """The refusal of a graph of ``nodes`` > ``limit`` nodes at ``spacing`` m, in the command
+    line's terms: the option keys ``{prefix}.max_nodes`` and ``{prefix}.{spacing_key}`` to change."""
+    step = 10 ** max(0, len(str(nodes)) - 2)
+    coarser = spacing * 1.1 * math.sqrt(nodes / limit)  # a surface's node count goes as 1 / spacing^2
+    return (f"the previous session's scan gives {nodes:,} {what} nodes at a {1e3 * spacing:g} mm node spacing "
+            f"(planning frame), more than the limit of {limit:,}: raise the limit, e.g. --set "
+            f"{prefix}.max_nodes={math.ceil(nodes / step) * step} (more memory and time), or coarsen the graph, "
+            f"e.g. --set {prefix}.{spacing_key}={coarser:.2g}")
+
 
 SOLVERS = ("lu-cg", "cg", "direct")
 
@@ -429,9 +442,8 @@ def _build_graph(P, config: WarpFieldConfig, origin=None) -> _Graph:
     P = P - origin
     M = len(nodes)
     if M > config.max_nodes:
-        raise PointCloudError(
-            f"source cloud P gives {M} control nodes at node_spacing={config.node_spacing} m "
-            f"(limit max_nodes={config.max_nodes}); is P in metres?")
+        raise GraphTooLargeError(too_many_nodes(M, config.max_nodes, config.node_spacing,
+                                                "registration.warp_field", "node_spacing", "control"))
     idx, w, live = _anchors(nodes, P, config)
     n, k = idx.shape
     blend = _blend_matrix(idx, w, M)

@@ -60,23 +60,53 @@ def _bounds(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return (np.array([points[:, a].min() for a in range(3)]), np.array([points[:, a].max() for a in range(3)]))
 
 
-def check_session_pair(previous: np.ndarray, current: np.ndarray, names=("previous", "current")) -> None:
+def _span(size_m: float, choice) -> str:
+    """A size in metres as the user gave it: in the file's units (``choice.used``) when known."""
+    from tpvp.io.units import length
+
+    if choice is None:
+        return length(1e3 * size_m, "mm")
+    return length(size_m * (1e3 if choice.used == "mm" else 1.0), choice.used)
+
+
+def _units_advice(units) -> str:
+    """What to do about two scans a units factor apart, given how their units were chosen
+    (``units``: their two :class:`~tpvp.io.units.UnitChoice`, or None for arrays in metres)."""
+    if units is None:
+        return "they look like different units (mm vs m?): give both arrays in metres"
+    requested = units[0].requested
+    if requested != "auto":
+        return (f"the files look like different units, and --units {requested} applies to both: try --units "
+                f"auto (it decides each file's units on its own) or convert one file")
+    read = (f"both as {units[0].used}" if units[0].used == units[1].used else
+            f"one as {units[0].used}, the other as {units[1].used}")
+    return (f"the files look like different units (--units auto read {read}; cm? inches?): convert them to "
+            f"the same units, m or mm, and give --units m or --units mm")
+
+
+def check_session_pair(previous: np.ndarray, current: np.ndarray, names=("previous", "current"),
+                       units=None) -> None:
     """Refuse two scans that cannot be sessions of one plant in one frame, in the scans' own units
-    (metres): sizes a units factor apart, or bounding boxes far apart for the plant's size."""
+    (metres): sizes a units factor apart, or bounding boxes far apart for the plant's size.
+    ``units`` (the two files' :class:`~tpvp.io.units.UnitChoice`, from ``read_point_cloud(...,
+    return_units=True)``) words the sizes in the files' own units and the advice by how their units
+    were chosen (``--units`` given or ``auto``)."""
     (lo_p, hi_p), (lo_q, hi_q) = (_bounds(c) for c in (previous, current))
     size_p, size_q = float((hi_p - lo_p).max()), float((hi_q - lo_q).max())
+    choice_p, choice_q = (None, None) if units is None else units
     small, large = sorted((size_p, size_q))
     if small > 0 and large / small > UNIT_RATIO:
         raise PointCloudError(
-            f"{names[0]} spans {1e3 * size_p:.4g} mm and {names[1]} {1e3 * size_q:.4g} mm, a factor "
-            f"{large / small:.0f} apart: the scans look like different units (mm vs m?); give --units")
+            f"{names[0]} spans {_span(size_p, choice_p)} and {names[1]} {_span(size_q, choice_q)}, a factor "
+            f"{large / small:.0f} apart (more than growth between sessions): {_units_advice(units)}")
     gap = np.maximum(0.0, np.maximum(lo_p - hi_q, lo_q - hi_p))
     gap = float(np.linalg.norm(gap))
     size = max(size_p, size_q)
     if gap > 0.2 * size:
+        unit = choice_q if choice_q is not None and (choice_p is None or choice_p.used == choice_q.used) else None
         raise PointCloudError(
-            f"{names[0]} and {names[1]} do not overlap: their bounding boxes are {gap:.3g} m apart for a "
-            f"plant of {1e3 * size:.4g} mm; the two sessions must be in one frame (align them first, e.g. "
+            f"{names[0]} and {names[1]} do not overlap: their bounding boxes are {_span(gap, unit)} apart for a "
+            f"plant of {_span(size, unit)}; the two sessions must be in one frame (align them first, e.g. "
             f"python -m data_tools prepare-session)")
 
 

@@ -10,7 +10,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from tpvp.errors import PointCloudError, checked_cloud
+from tpvp.errors import ConfigError, PointCloudError, checked_cloud
 from tpvp.scene import voxels
 from tpvp.scene.grid import plant_grid
 from tpvp.scene.normalise import check_session_pair, normalise_plant, up_rotation
@@ -95,10 +95,34 @@ def build_scene(previous_points, current_points, config,
                 f"scaled to a {config.scene.largest_side:g} m largest side ({len(points)} points); a plant scan "
                 f"has at least {config.scene.min_plant_voxels} - is this the right file?")
     truth = visibility_matrix(grid, space.positions, space.look_ats, sensor)
+    oracle = oracle_voxels(truth)
+    if len(oracle) == 0:
+        raise ConfigError(_unseen(config, space, sensor, current.scale if config.scene.scale == "native" else 1.0))
     plant_from_scan = current.matrix
     plant_from_scan[:3, :3] = plant_from_scan[:3, :3] @ up
-    return Scene(previous, current_points, grid, space, sensor, truth, oracle_voxels(truth), plant_from_scan,
+    return Scene(previous, current_points, grid, space, sensor, truth, oracle, plant_from_scan,
                  current.table_points, names, reduction)
+
+
+def _unseen(config, space, sensor, per_metre: float) -> str:
+    """Why no candidate view sees the plant, in the user's terms: the views' distance from the
+    plant and the sensor's range, in the view space's metres (``per_metre``: planning-frame units
+    per metre of the view space, the plant's scale with ``--scale native``, else 1)."""
+    distance = np.linalg.norm(space.positions, axis=1) / per_metre
+    if config.scene.scale == "native":
+        frame = "--scale native: the plant at its true size"
+        fix = ("check the scans' units (--units) and the view sphere's radius (--radius M: metres around the "
+               "real plant)")
+    else:
+        frame = (f"--scale normalised: the plant scaled to a {config.scene.largest_side:g} m largest side "
+                 f"at the origin")
+        fix = ("check the view space's radius and units (positions in metres), or move the views onto a "
+               "sphere around the plant with --radius (e.g. --radius 0.4)")
+    near, far = distance.min(), distance.max()
+    span = f"{near:.3g} m" if far - near <= 0.01 * far else f"{near:.3g}-{far:.3g} m"
+    return (f"view space {config.view_space!r}: no candidate view sees the plant: its {len(space)} views are "
+            f"{span} from the centre of a plant {config.scene.largest_side / per_metre:.3g} m across, the sensor "
+            f"sees {sensor.max_range / per_metre:.3g} m far ({frame}); {fix}")
 
 
 def observation(scene: Scene, view: int) -> np.ndarray:

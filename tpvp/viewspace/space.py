@@ -29,6 +29,9 @@ PLANT_RADIUS = 0.4  # m, radius of the bundled single-plant view spheres
 PLANT_RANGE = 1.0  # m, sensor range of the single-plant setting
 
 VIEW_SPACES = Registry("view space")
+#: What a row of a view-space file must look like (for messages).
+VIEW_ROW = ("each row must be 3 numbers 'x y z' (a view looking at the origin) or 6 numbers 'x y z lx ly lz' "
+            "(position and look-at point), in metres, after an optional count line")
 
 
 @dataclass(frozen=True, eq=False)
@@ -60,8 +63,10 @@ class ViewSpace:
             raise ConfigError(f"view space {self.name!r} has no views")
         if not (np.all(np.isfinite(positions)) and np.all(np.isfinite(look_ats))):
             raise ConfigError(f"view space {self.name!r} has NaN or infinite coordinates")
-        if np.any(np.linalg.norm(positions - look_ats, axis=1) == 0):
-            raise ConfigError(f"view space {self.name!r}: a view looks at its own position")
+        same = np.flatnonzero(np.linalg.norm(positions - look_ats, axis=1) == 0)
+        if len(same):
+            raise ConfigError(f"view space {self.name!r}: view {same[0]} (counting from 0) looks at its own "
+                              f"position {positions[same[0]].tolist()}: give it a look-at point elsewhere")
         for key, index in self.initial_views.items():
             if not 0 <= int(index) < len(positions):
                 raise ConfigError(f"view space {self.name!r}: initial view {key!r} = {index} is out of range")
@@ -115,30 +120,47 @@ def read_view_space_file(path, name: str | None = None) -> ViewSpace:
         raise InputFileError(f"view space {str(path)!r} is neither one of {', '.join(VIEW_SPACES.names())}, "
                              f"'tammes:N' nor an existing file")
     try:
-        rows = [line.split() for line in path.read_text().splitlines() if line.strip() and not line.startswith("#")]
+        lines = [(number, line.split()) for number, line in enumerate(path.read_text().splitlines(), 1)
+                 if line.strip() and not line.startswith("#")]
     except (OSError, UnicodeDecodeError) as exc:
         raise InputFileError(f"{path}: cannot read the view-space file ({exc})") from None
     declared = None
-    if rows and len(rows[0]) == 1:
-        declared, rows = rows[0][0], rows[1:]
-    try:
-        values = np.array(rows, dtype=np.float64)
-    except ValueError:
-        raise InputFileError(f"{path}: not a view-space file (optional count line, then rows of "
-                             f"'x y z' or 'x y z lx ly lz')") from None
-    if values.ndim != 2 or values.shape[1] not in (3, 6) or len(values) == 0:
-        raise InputFileError(f"{path}: expected rows of 3 ('x y z') or 6 ('x y z lx ly lz') numbers, "
-                             f"got shape {values.shape}")
-    if declared is not None:
+    if lines and len(lines[0][1]) == 1:
+        (count_line, (declared,)), lines = lines[0], lines[1:]
         if not re.fullmatch(r"\d+", declared):
-            raise InputFileError(f"{path}: the count line must be a whole number of views, got {declared!r}")
-        if int(declared) != len(values):
-            raise InputFileError(f"{path}: first line declares {declared} views but {len(values)} follow")
-    if not np.all(np.isfinite(values)):
-        raise InputFileError(f"{path}: contains NaN or infinite coordinates")
+            raise InputFileError(f"{path}: line {count_line}: the count line must be a whole number of views, "
+                                 f"got {declared!r}")
+    if not lines:
+        raise InputFileError(f"{path}: holds no views; {VIEW_ROW}")
+    width = len(lines[0][1])
+    for number, words in lines:
+        try:
+            [float(w) for w in words]
+            bad = len(words) not in (3, 6) or len(words) != width
+        except ValueError:
+            bad = True
+        if bad:
+            text = " ".join(words)
+            text = text if len(text) <= 40 else text[:37] + "..."
+            also = "" if len(words) not in (3, 6) or width == len(words) else (
+                f" (line {lines[0][0]} has {width} numbers: every row must have the same count)")
+            raise InputFileError(f"{path}: line {number} is not a view: {text!r}{also}; {VIEW_ROW}")
+    values = np.array([words for _, words in lines], dtype=np.float64)
+    if declared is not None and int(declared) != len(values):
+        raise InputFileError(f"{path}: first line declares {declared} views but {len(values)} follow")
+    bad = ~np.isfinite(values).all(axis=1)
+    if bad.any():
+        first = int(np.flatnonzero(bad)[0])
+        raise InputFileError(f"{path}: line {lines[first][0]} (view {first}) has NaN or infinite coordinates; "
+                             f"{VIEW_ROW}")
     look_ats = values[:, 3:] if values.shape[1] == 6 else np.zeros((len(values), 3))
-    if np.any(np.linalg.norm(values[:, :3] - look_ats, axis=1) == 0):
-        raise InputFileError(f"{path}: a view looks at its own position")
+    same = np.linalg.norm(values[:, :3] - look_ats, axis=1) == 0
+    if same.any():
+        first = int(np.flatnonzero(same)[0])
+        where = "the origin" if values.shape[1] == 3 else "its own position"
+        raise InputFileError(f"{path}: line {lines[first][0]} (view {first}, counting from 0) looks at "
+                             f"{where}, where the camera is: move the view or give it a look-at point "
+                             f"elsewhere ('x y z lx ly lz')")
     return ViewSpace(name or str(path), values[:, :3], look_ats)
 
 

@@ -1,0 +1,347 @@
+"""The lines users see on bad input (docs/messages.md), one test per row of its table.
+
+Each row of docs/messages.md's table names a test id; :data:`ROWS` holds, for each id, the real
+command that shows the line (``tpvp.cli.main`` / ``data_tools.cli.main`` in this process, or the
+installed CLI in a subprocess), its exit status and the line's key content. A table row without a
+test here, or a test without a row, fails :func:`test_every_row_of_the_table_has_a_test`.
+"""
+
+from __future__ import annotations
+
+import gzip
+import os
+import re
+import subprocess
+import sys
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from data_tools import cli as data_cli
+from tpvp.cli import main
+from tpvp.errors import install_warning_format
+from tpvp.scene.samples import sample_path
+
+ROOT = Path(__file__).resolve().parent.parent
+DOC = ROOT / "docs" / "messages.md"
+ROWS = {}
+
+
+def row(test_id: str, exit_status: int, *expected: str, stream: str = "err"):
+    """Register a row: the function (its arguments: fixtures by name) runs the command and returns
+    ``(exit status, stdout, stderr)``; the last line of ``stream`` that holds ``expected[0]`` must
+    hold every ``expected`` string (a regular expression when it starts with ``re:``)."""
+    def register(func):
+        ROWS[test_id] = (func, exit_status, expected, stream)
+        return func
+    return register
+
+
+def run_cli(argv, capsys, entry=main):
+    """``entry(argv)`` in this process: (exit status, stdout, stderr); argparse errors included."""
+    try:
+        code = entry([str(a) for a in argv])
+    except SystemExit as exc:
+        code = exc.code
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def run_subprocess(argv, cwd):
+    env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    result = subprocess.run([sys.executable, "-m", "tpvp", *map(str, argv)], capture_output=True, text=True,
+                            cwd=cwd, env=env, timeout=300)
+    return result.returncode, result.stdout, result.stderr
+
+
+@pytest.fixture(scope="module")
+def scans(tmp_path_factory):
+    """The bundled real tomato pair (mm), every 4th point, as plain xyz files: day1.xyz, day2.xyz."""
+    folder = tmp_path_factory.mktemp("scans")
+    for name, sample in (("day1.xyz", "tomato_0305"), ("day2.xyz", "tomato_0306")):
+        rows = np.loadtxt(gzip.decompress(sample_path(sample).read_bytes()).decode().splitlines())[::4, :3]
+        np.savetxt(folder / name, rows, fmt="%.4f")
+    return folder
+
+
+@pytest.fixture(scope="module")
+def metres_run(scans):
+    """One whole `tpvp plan` of the millimetre pair read with --units m (a quick registration)."""
+    return run_subprocess(["plan", "--previous", scans / "day1.xyz", "--current", scans / "day2.xyz", "--units", "m",
+                           "--set", "registration.embedded_deformation.iterations=5", "--output",
+                           scans.parent / "metres_run"], cwd=scans)
+
+
+def points(scans) -> np.ndarray:
+    return np.loadtxt(scans / "day1.xyz")
+
+
+def ply_bytes(pts, comment: bytes = b"") -> bytes:
+    head = (b"ply\nformat binary_little_endian 1.0\n" + comment + b"element vertex %d\nproperty float x\n"
+            b"property float y\nproperty float z\nend_header\n" % len(pts))
+    return head + np.asarray(pts, dtype="<f4").tobytes()
+
+
+def plan(previous, current, *more):
+    return ["plan", "--previous", previous, "--current", current, *more, "--output", Path(previous).parent / "out"]
+
+
+# --------------------------------------------------------------------------------------------------
+# reading the scans
+
+
+@row("missing-file", 2, "day0.ply: file not found")
+def _(tmp, scans, capsys):
+    return run_cli(plan(tmp / "day0.ply", scans / "day2.xyz"), capsys)
+
+
+@row("truncated-ply", 2, "day1.ply: truncated: header declares 6199 vertices, file holds 6186")
+def _(tmp, scans, capsys):
+    (tmp / "day1.ply").write_bytes(ply_bytes(points(scans))[:-150])
+    return run_cli(plan(tmp / "day1.ply", scans / "day2.xyz"), capsys)
+
+
+@row("empty-cloud", 2, "day1.ply: holds no points (element vertex 0)")
+def _(tmp, scans, capsys):
+    (tmp / "day1.ply").write_bytes(ply_bytes(np.zeros((0, 3))))
+    return run_cli(plan(tmp / "day1.ply", scans / "day2.xyz"), capsys)
+
+
+@row("nan-cloud", 2, "day1.xyz: 1 of 6,199 points has NaN/inf coordinates (first at point 4)", "--drop-invalid")
+def _(tmp, scans, capsys):
+    pts = points(scans)
+    pts[3, 1] = np.nan
+    np.savetxt(tmp / "day1.xyz", pts)
+    return run_cli(plan(tmp / "day1.xyz", scans / "day2.xyz"), capsys)
+
+
+@row("ply-header-not-ascii", 2, "day1.ply: line 3 of the PLY header is not ASCII text",
+     "byte 0xe9 at column 24", "'comment scanned by Andr\\xe9'", "must be plain ASCII")
+def _(tmp, scans, capsys):
+    (tmp / "day1.ply").write_bytes(ply_bytes(points(scans), b"comment scanned by Andr\xe9\n"))
+    return run_cli(plan(tmp / "day1.ply", scans / "day2.xyz"), capsys)
+
+
+@row("pcd-header-not-ascii", 2, "day1.pcd: line 2 of the PCD header is not ASCII text", "byte 0xc3 at column 18",
+     "'# scanned by André'", "must be plain ASCII")
+def _(tmp, scans, capsys):
+    pts = points(scans)
+    head = ("# .PCD v0.7\n# scanned by André\nVERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\n"
+            f"WIDTH {len(pts)}\nHEIGHT 1\nPOINTS {len(pts)}\nDATA binary\n")
+    (tmp / "day1.pcd").write_bytes(head.encode() + pts.astype("<f4").tobytes())
+    return run_cli(plan(tmp / "day1.pcd", scans / "day2.xyz"), capsys)
+
+
+@row("no-end-header", 2, "day1.ply: PLY header has no 'end_header' line (binary data at line 7)")
+def _(tmp, scans, capsys):
+    data = ply_bytes(points(scans))
+    (tmp / "day1.ply").write_bytes(data.replace(b"end_header\n", b"\xff\xfe"))  # binary data right after
+    return run_cli(plan(tmp / "day1.ply", scans / "day2.xyz"), capsys)
+
+
+# --------------------------------------------------------------------------------------------------
+# units and coordinates
+
+
+@row("wrong-units", 2, "day1.xyz: wrong units? --units m makes it a 700 m plant (limit 100 m)",
+     "it looks like millimetres: use --units mm or --units auto")
+def _(tmp, scans, capsys):
+    pts = np.random.default_rng(0).uniform(0, 700, size=(500, 3))
+    pts[:2] = [[0, 0, 0], [700, 0, 0]]
+    np.savetxt(tmp / "day1.xyz", pts)
+    return run_cli(plan(tmp / "day1.xyz", scans / "day2.xyz", "--units", "m"), capsys)
+
+
+@row("units-differ-given", 2, "day1.xyz spans 46.2 m and ", "day2.xyz 0.0479 m, a factor 964 apart",
+     "--units m applies to both: try --units auto")
+def _(tmp, scans, capsys):
+    np.savetxt(tmp / "day2.xyz", np.loadtxt(scans / "day2.xyz") / 1000)
+    return run_cli(plan(scans / "day1.xyz", tmp / "day2.xyz", "--units", "m"), capsys)
+
+
+@row("units-differ-auto", 2, "day1.xyz spans 46.2 mm and ", "day2.xyz 4.79 m, a factor 104 apart",
+     "--units auto read one as mm, the other as m", "give --units m or --units mm")
+def _(tmp, scans, capsys):
+    np.savetxt(tmp / "day2.xyz", np.loadtxt(scans / "day2.xyz") / 10)  # centimetres
+    return run_cli(plan(scans / "day1.xyz", tmp / "day2.xyz"), capsys)
+
+
+@row("plant-over-5-m", 0, "day1.xyz: read as metres (--units m) the plant spans 46.2 m", "tpvp: warning: ",
+     "give --units mm")
+def _(tmp, scans, metres_run):
+    return metres_run
+
+
+@row("absurd-coordinates", 2, "day1.xyz: 1 of 6,199 points has absurd coordinates",
+     "(first: x = 1e+30 at point index 5, counting from 0)", "beyond 1e+10 in metres or millimetres")
+def _(tmp, scans, capsys):
+    pts = points(scans)
+    pts[5, 0] = 1e30
+    np.savetxt(tmp / "day1.xyz", pts)
+    return run_cli(plan(tmp / "day1.xyz", scans / "day2.xyz"), capsys)
+
+
+@row("absurd-coordinates-1e308", 2, "day1.ply: all 6,199 points have absurd coordinates",
+     "re:\\(first: x = -?1e\\+308 at point index 0")
+def _(tmp, scans, capsys):
+    pts = np.where(points(scans) > 0, 1e308, -1e308)  # max - min overflows: no RuntimeWarning either
+    head = (b"ply\nformat binary_little_endian 1.0\nelement vertex %d\nproperty double x\nproperty double y\n"
+            b"property double z\nend_header\n" % len(pts))
+    (tmp / "day1.ply").write_bytes(head + pts.astype("<f8").tobytes())
+    return run_cli(plan(tmp / "day1.ply", scans / "day2.xyz"), capsys)
+
+
+@row("stray-point", 2, "day1.xyz: 1 of 6,199 points lies far from all the others",
+     "(y = 3e+07 at point index 7, counting from 0)", "with it the scan spans 3e+07 mm, without it 46.2 mm")
+def _(tmp, scans, capsys):
+    pts = points(scans)
+    pts[7, 1] = 3e7
+    np.savetxt(tmp / "day1.xyz", pts)
+    return run_cli(plan(tmp / "day1.xyz", scans / "day2.xyz"), capsys)
+
+
+@row("python-warning", 2, "shifted.xyz: coordinates reach |c| = 100", "tpvp: warning: ", "taken as metres",
+     "give --units mm")
+def _(tmp, scans, capsys):
+    plant = np.random.default_rng(1).normal(size=(3000, 3)) * 0.02
+    np.savetxt(tmp / "shifted.xyz", plant + [100.0, 0, 0])
+    np.savetxt(tmp / "day2.xyz", plant)
+    return run_subprocess(plan(tmp / "shifted.xyz", tmp / "day2.xyz"), cwd=tmp)  # the real CLI's warnings
+
+
+# --------------------------------------------------------------------------------------------------
+# view spaces
+
+
+@row("view-space-bad-row", 2, "views.txt: line 3 is not a view: '0 0.4 abc'",
+     "each row must be 3 numbers 'x y z'", "or 6 numbers 'x y z lx ly lz'")
+def _(tmp, scans, capsys):
+    (tmp / "views.txt").write_text("3\n0.4 0 0\n0 0.4 abc\n0 0 0.4\n")
+    return run_cli(plan(scans / "day1.xyz", scans / "day2.xyz", "--view-space", tmp / "views.txt"), capsys)
+
+
+@row("view-space-own-position", 2, "views.txt: line 2 (view 1, counting from 0) looks at its own position",
+     "give it a look-at point elsewhere")
+def _(tmp, scans, capsys):
+    (tmp / "views.txt").write_text("0.4 0 0 0 0 0\n0 0.4 0 0 0.4 0\n")
+    return run_cli(plan(scans / "day1.xyz", scans / "day2.xyz", "--view-space", tmp / "views.txt"), capsys)
+
+
+def _hemisphere(scale: float, far_view: int | None = None) -> np.ndarray:
+    views = np.loadtxt(ROOT / "tpvp" / "data" / "view_spaces" / "view_space_hemisphere32.txt", skiprows=1)
+    if far_view is None:
+        return views * scale
+    views[far_view] *= scale
+    return views
+
+
+@row("view-space-out-of-range", 2, "no candidate view sees the plant: its 32 views are 5 m from the centre of a "
+     "plant 0.24 m across, the sensor sees 1 m far", "check the view space's radius and units", "--radius")
+def _(tmp, scans, capsys):
+    np.savetxt(tmp / "far.txt", _hemisphere(12.5))
+    return run_cli(plan(scans / "day1.xyz", scans / "day2.xyz", "--view-space", tmp / "far.txt"), capsys)
+
+
+@row("initial-view-blind", 2, "initial view 17 of view space", "sees nothing of the plant (it is 5 m from",
+     "choose an --initial-view that does: 0, 1, 2", "(31 of 32 views see it)")
+def _(tmp, scans, capsys):
+    np.savetxt(tmp / "far17.txt", _hemisphere(12.5, far_view=17))
+    return run_cli(plan(scans / "day1.xyz", scans / "day2.xyz", "--view-space", tmp / "far17.txt"), capsys)
+
+
+# --------------------------------------------------------------------------------------------------
+# the pipeline
+
+
+@row("registration-node-limit", 2, "day1.xyz: the previous session's scan gives ",
+     "deformation-graph nodes at a 4 mm node spacing (planning frame), more than the limit of 10",
+     "--set registration.embedded_deformation.max_nodes=", "--set registration.embedded_deformation.node_coverage=")
+def _(tmp, scans, capsys):
+    return run_cli(plan(scans / "day1.xyz", scans / "day2.xyz", "--set",
+                        "registration.embedded_deformation.max_nodes=10"), capsys)
+
+
+@row("unreachable-voxels", 0, "view selection", "re:\\d+ views, optimal=True, \\d+ unreachable voxels dropped",
+     stream="out")
+def _(tmp, scans, metres_run):
+    return metres_run
+
+
+@row("kaggle-credentials", 2, "data_tools greenhouse download: error: no Kaggle credentials found",
+     "https://www.kaggle.com/settings/api", "KAGGLE_API_TOKEN")
+def _(tmp, scans, capsys, monkeypatch):
+    for var in ("KAGGLE_API_TOKEN", "KAGGLE_USERNAME", "KAGGLE_KEY", "KAGGLE_CONFIG_DIR", "XDG_CONFIG_HOME"):
+        monkeypatch.delenv(var, raising=False)
+    monkeypatch.setenv("HOME", str(tmp / "home"))
+    return run_cli(["greenhouse", "download", "--output", tmp / "out"], capsys, entry=data_cli.main)
+
+
+# --------------------------------------------------------------------------------------------------
+
+
+def _line_with(text: str, first: str) -> str:
+    lines = [line for line in text.splitlines() if first in line]
+    assert lines, f"no line holds {first!r}:\n{text}"
+    return lines[-1]
+
+
+@pytest.mark.parametrize("test_id", sorted(ROWS))
+def test_message(test_id, tmp_path, scans, capsys, monkeypatch, request):
+    func, exit_status, expected, stream = ROWS[test_id]
+    wanted = {"tmp": tmp_path, "scans": scans, "capsys": capsys, "monkeypatch": monkeypatch}
+    names = func.__code__.co_varnames[:func.__code__.co_argcount]
+    if "metres_run" in names:
+        wanted["metres_run"] = request.getfixturevalue("metres_run")
+    code, out, err = func(**{name: wanted[name] for name in names})
+    text = out if stream == "out" else err
+    assert code == exit_status, f"exit status {code}, not {exit_status}:\n{out}\n{err}"
+    # stderr: one-line warnings, then (on failure) exactly one error line; argparse puts its usage first.
+    lines = err.strip().splitlines()
+    if lines and lines[0].startswith("usage:"):
+        lines = [line for line in lines if not line.startswith(("usage:", " "))]
+    prog = "data_tools" if test_id == "kaggle-credentials" else "tpvp"
+    assert all(line.startswith((f"{prog}: warning: ", f"{prog} ")) for line in lines), err
+    assert sum(": error: " in line for line in lines) == (exit_status != 0), err
+    assert "Traceback" not in err and "Warning:" not in err and ".py:" not in err, err
+    line = _line_with(text, expected[0])
+    for part in expected:
+        if part.startswith("re:"):
+            assert re.search(part[3:], line), f"{part[3:]!r} does not match {line!r}"
+        else:
+            assert part in line, f"{part!r} not in {line!r}"
+
+
+def test_every_row_of_the_table_has_a_test():
+    ids = re.findall(r"^\|.*\|\s*`([a-z0-9-]+)`\s*\|\s*$", DOC.read_text(encoding="utf-8"), flags=re.M)
+    assert ids, "no table rows with a test id in docs/messages.md"
+    assert len(ids) == len(set(ids)), sorted(i for i in ids if ids.count(i) > 1)
+    assert set(ids) == set(ROWS), f"rows without a test: {sorted(set(ids) - set(ROWS))}; " \
+                                  f"tests without a row: {sorted(set(ROWS) - set(ids))}"
+
+
+def test_a_python_warning_is_one_line_naming_the_program(capsys):
+    with warnings.catch_warnings():  # restores warnings.showwarning and the filters afterwards
+        warnings.simplefilter("always")
+        install_warning_format("prog")
+        warnings.warn("first line\nsecond line", RuntimeWarning)
+    assert capsys.readouterr().err == "prog: warning: first line second line\n"
+
+
+@pytest.mark.parametrize("units", ["auto", "m", "mm"])
+def test_absurd_coordinates_are_refused_without_a_numpy_warning(units):
+    from tpvp.errors import PointCloudError
+    from tpvp.io.units import to_metres
+
+    pts = np.random.default_rng(2).normal(size=(200, 3)) * 50
+    pts[[3, 4]] = [[1e308, 0, 0], [-1e308, 0, 0]]  # max - min overflows float64
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # a RuntimeWarning (overflow) would fail here
+        with pytest.raises(PointCloudError, match=r"2 of 200 points have absurd coordinates \(first: x = 1e\+308 "
+                                                  r"at point index 3"):
+            to_metres(pts, units, source="scan.xyz")
+        pts[[3, 4]] = [[0, 3e6, 0], [0, 0, 0]]  # in range, but 3 km away in mm: a stray point
+        with pytest.raises(PointCloudError, match=r"scan.xyz: 1 of 200 points lies far from all the others "
+                                                  r"\(y = 3e\+06 at point index 3"):
+            to_metres(pts, "mm", source="scan.xyz")
