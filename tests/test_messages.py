@@ -11,6 +11,7 @@ from __future__ import annotations
 import gzip
 import os
 import re
+import signal
 import subprocess
 import sys
 import warnings
@@ -20,6 +21,7 @@ import numpy as np
 import pytest
 
 from data_tools import cli as data_cli
+from helpers import benchmark_module
 from tpvp.cli import main
 from tpvp.errors import install_warning_format
 from tpvp.scene.samples import sample_path
@@ -84,8 +86,9 @@ def ply_bytes(pts, comment: bytes = b"") -> bytes:
     return head + np.asarray(pts, dtype="<f4").tobytes()
 
 
-def plan(previous, current, *more):
-    return ["plan", "--previous", previous, "--current", current, *more, "--output", Path(previous).parent / "out"]
+def plan(previous, current, *more, output=None):
+    return ["plan", "--previous", previous, "--current", current, *more,
+            "--output", output or Path(previous).parent / "out"]
 
 
 # --------------------------------------------------------------------------------------------------
@@ -279,6 +282,63 @@ def _(tmp, scans, capsys, monkeypatch):
 
 
 # --------------------------------------------------------------------------------------------------
+# the output folder, the disk and signals
+
+
+@row("output-busy", 3, "output folder", "is being written by another run", "wait for it to finish or choose another folder")
+def _(tmp, scans, capsys):
+    import fcntl
+
+    with open(tmp / ".out.tpvp-lock", "w") as lock:  # what a running `tpvp plan --output out` holds
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        return run_cli(plan(scans / "day1.xyz", scans / "day2.xyz", output=tmp / "out"), capsys)
+
+
+@row("disk-full", 4, "cannot write", "plan.csv: No space left on device; nothing was published", "is as it was")
+def _(tmp, scans, capsys):
+    from tpvp.io import faults
+
+    with faults.inject("enospc", 1):  # the first file write fails as on a full disk
+        return run_cli(plan(scans / "day1.xyz", scans / "day2.xyz", output=tmp / "out"), capsys)
+
+
+@row("read-only-file-system", 4, "is on a read-only file system; choose a folder on a writable disk")
+def _(tmp, scans, capsys):
+    real_faults = benchmark_module("real_faults")
+
+    try:
+        with real_faults.mounted_tmpfs(1 << 20, read_only=True) as disk:
+            return run_cli(plan(scans / "day1.xyz", scans / "day2.xyz", output=disk / "out"), capsys)
+    except real_faults.Unavailable as exc:
+        pytest.skip(str(exc))
+
+
+@row("interrupted-while-starting", 130, "tpvp: interrupted while starting; nothing was written")
+def _(tmp, scans):
+    real_faults = benchmark_module("real_faults")
+
+    command = real_faults.tpvp(*plan(scans / "day1.xyz", scans / "day2.xyz", output=tmp / "out"))
+    result = real_faults.start_up_try(command, 0.3, signal.SIGINT)
+    return result["rc"], "", "\n".join(result["stderr"])
+
+
+@row("interrupted-while-running", 130, "tpvp plan: interrupted; nothing was written", "was not created")
+def _(tmp, scans, capsys):
+    from tpvp.io import faults
+
+    with faults.inject("interrupt", 1):  # Ctrl-C as the first file is written
+        return run_cli(plan(scans / "day1.xyz", scans / "day2.xyz", output=tmp / "out"), capsys)
+
+
+@row("data-tools-output-inside-input", 2, "data_tools greenhouse clean: error: dataset", "lies inside the input",
+     "inputs are only read: choose another dataset outside")
+def _(tmp, capsys):
+    (tmp / "raw").mkdir()
+    return run_cli(["greenhouse", "clean", tmp / "raw", "--output", tmp / "raw" / "clean"], capsys,
+                   entry=data_cli.main)
+
+
+# --------------------------------------------------------------------------------------------------
 
 
 def _line_with(text: str, first: str) -> str:
@@ -301,9 +361,10 @@ def test_message(test_id, tmp_path, scans, capsys, monkeypatch, request):
     lines = err.strip().splitlines()
     if lines and lines[0].startswith("usage:"):
         lines = [line for line in lines if not line.startswith(("usage:", " "))]
-    prog = "data_tools" if test_id == "kaggle-credentials" else "tpvp"
-    assert all(line.startswith((f"{prog}: warning: ", f"{prog} ")) for line in lines), err
-    assert sum(": error: " in line for line in lines) == (exit_status != 0), err
+    prog = "data_tools" if test_id in ("kaggle-credentials", "data-tools-output-inside-input") else "tpvp"
+    assert all(line.startswith((f"{prog}: warning: ", f"{prog} ", f"{prog}: interrupted")) for line in lines), err
+    assert sum(": error: " in line for line in lines) == (exit_status in (1, 2, 3, 4)), err
+    assert sum(": interrupted" in line for line in lines) == (exit_status == 130), err
     assert "Traceback" not in err and "Warning:" not in err and ".py:" not in err, err
     line = _line_with(text, expected[0])
     for part in expected:

@@ -3,7 +3,6 @@ a file-size limit everywhere), Ctrl-C / SIGTERM at random moments of start-up, m
 read-only file systems as output folders. The tries come from ``benchmarks/real_faults.py``, which
 runs more of them."""
 
-import importlib.util
 import json
 import os
 import resource
@@ -15,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from helpers import benchmark_module
 from tpvp.errors import InputFileError, OutputWriteError
 from tpvp.io import atomic_write_text, faults
 from tpvp.io.publish import RUN_MARKER, RunInterrupted, staged_folder
@@ -23,14 +23,7 @@ from tpvp.viz.recording import write_recording
 ROOT = Path(__file__).resolve().parent.parent
 
 
-def _load_real_faults():
-    spec = importlib.util.spec_from_file_location("real_faults", ROOT / "benchmarks" / "real_faults.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-real_faults = _load_real_faults()
+real_faults = benchmark_module("real_faults")
 
 
 @pytest.fixture
