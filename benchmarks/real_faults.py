@@ -188,7 +188,7 @@ def _start_up(tries: int) -> bool:
                 lines.update(result["stderr"][:1] if ok else [])
                 if not ok:
                     print(f"  FAILED at {delay:.3f} s ({signal.Signals(signum).name}): rc {result['rc']}, "
-                          f"{len(result['stderr'])} lines: {result['stderr'][-3:]}")
+                          f"{len(result['stderr'])} lines:\n" + "\n".join(f"    | {line}" for line in result["stderr"]))
             print("  lines seen:\n" + "\n".join(f"    {line}" for line in sorted(lines)))
     print(f"start-up: {good} of {total} signals ended with exit 130 and one line")
     return good == total

@@ -97,6 +97,16 @@ def _redeliver(received: list, previous_hook):
     return hook
 
 
+def _end_interrupted(status: int) -> None:
+    """End the process now with ``status``: after a Ctrl-C, CPython may have marked the
+    KeyboardInterrupt as unhandled (when it passed through an extension's own Python code) and
+    would end the process by SIGINT instead, whatever the command returned; an extension the
+    interrupt left half set up may also print at teardown. The command has cleaned up already."""
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(status)
+
+
 def run_checked(prog: str, load_main) -> int:
     """Check the dependencies, then ``load_main()()`` (``load_main`` imports and returns the CLI's
     ``main``); a missing package, found up front or at import time, is one line and status 2; a
@@ -104,6 +114,7 @@ def run_checked(prog: str, load_main) -> int:
     previous = {signum: signal.getsignal(signum) for signum in _STOPS}
     previous_hook = sys.unraisablehook
     in_main_thread = threading.current_thread() is threading.main_thread()  # only it may set handlers
+    received = []  # the signals that arrived once the command runs
     try:
         if in_main_thread:
             for signum in _STOPS:
@@ -120,32 +131,38 @@ def run_checked(prog: str, load_main) -> int:
                 raise  # a bug in this project, not a missing dependency
             print(missing_message(prog, top), file=sys.stderr)
             return 2
-        received = []
         if in_main_thread:
             for signum in _STOPS:
                 signal.signal(signum, _interrupt(received))
             sys.unraisablehook = _redeliver(received, previous_hook)
         try:
-            return main()
+            status = main()
         except KeyboardInterrupt as exc:  # one the command did not report itself (e.g. while parsing)
             report = exc.report() if hasattr(exc, "report") else "interrupted; nothing was written"
             print(f"{prog}: {report}", file=sys.stderr)
-            return 130
+            status = 130
         except Exception:
             if not received:
                 raise
             # Ctrl-C inside an import or a C extension surfaces as another exception (open3d:
-            # "ImportError: initialization failed") and leaves that extension half set up; its
-            # teardown at exit would print and change the status, so end here (the staged
-            # outputs were cleaned up on the way out).
+            # "ImportError: initialization failed"); the staged outputs were cleaned up on the way.
             print(f"{prog}: interrupted; nothing was published", file=sys.stderr)
-            sys.stdout.flush()
-            sys.stderr.flush()
-            os._exit(130)
+            _end_interrupted(130)
+        if received and status == 0:
+            # A library swallowed the KeyboardInterrupt (an optional import that fails "cleanly")
+            # and the command ran to its end: say so, and still end as interrupted.
+            print(f"{prog}: interrupted, but the command had already finished (its outputs are complete)",
+                  file=sys.stderr)
+            status = 130
+        if received:
+            _end_interrupted(status)
+        return status
     finally:
         if in_main_thread:
+            # After an interrupt, a redelivered signal may still be pending: it must not kill the
+            # process on its way out with the default handler.
             for signum, handler in previous.items():
-                signal.signal(signum, handler)
+                signal.signal(signum, signal.SIG_IGN if received else handler)
             sys.unraisablehook = previous_hook
 
 
