@@ -152,10 +152,10 @@ def start_up_ok(result: dict) -> bool:
     return result["rc"] == 130 and len(result["stderr"]) == 1 and "Traceback" not in result["stderr"][0]
 
 
-def start_up_moments(tries: int, seed: int = 0, end: float = 1.5) -> list[tuple[float, int]]:
-    """``tries`` (delay, signal) pairs: delays uniform in [PYTHON_START_S, end], SIGINT and SIGTERM alternately."""
+def start_up_moments(tries: int, seed: int = 0, end: float = 1.5, start: float = PYTHON_START_S) -> list[tuple[float, int]]:
+    """``tries`` (delay, signal) pairs: delays uniform in [start, end], SIGINT and SIGTERM alternately."""
     rng = random.Random(seed)
-    return [(rng.uniform(PYTHON_START_S, end), signal.SIGINT if i % 2 == 0 else signal.SIGTERM) for i in range(tries)]
+    return [(rng.uniform(start, end), signal.SIGINT if i % 2 == 0 else signal.SIGTERM) for i in range(tries)]
 
 
 def _full_disk(tries: int) -> bool:
