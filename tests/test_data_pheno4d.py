@@ -254,7 +254,7 @@ def test_prepare_generated_archive_folder_and_zip_agree(raw, tmp_path):
 BAD_MEMBERS = {
     "truncated": (b"1.0 2.0 3.0 1\n4.0 5.0 6.0 2\n7.0 8.", r"line 3 has 2 columns, earlier lines have 4"),
     "garbage": (b"\x89PNG\r\n\x1a\n\x00\x00\x00garbage", r"contains binary data"),
-    "nan": (b"1 2 3 1\nnan 5 6 1\n7 8 9 2\n", r"1 of 3 points have NaN/inf coordinates"),
+    "nan": (b"1 2 3 1\nnan 5 6 1\n7 8 9 2\n", r"1 of 3 points has NaN/inf coordinates"),
     "empty": (b"", r"empty file \(0 bytes\)"),
 }
 

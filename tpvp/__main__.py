@@ -104,6 +104,7 @@ def run_checked(prog: str, load_main) -> int:
     previous = {signum: signal.getsignal(signum) for signum in _STOPS}
     previous_hook = sys.unraisablehook
     in_main_thread = threading.current_thread() is threading.main_thread()  # only it may set handlers
+    received = []  # the signals that arrived once the command runs
     try:
         if in_main_thread:
             for signum in _STOPS:
@@ -120,13 +121,12 @@ def run_checked(prog: str, load_main) -> int:
                 raise  # a bug in this project, not a missing dependency
             print(missing_message(prog, top), file=sys.stderr)
             return 2
-        received = []
         if in_main_thread:
             for signum in _STOPS:
                 signal.signal(signum, _interrupt(received))
             sys.unraisablehook = _redeliver(received, previous_hook)
         try:
-            return main()
+            status = main()
         except KeyboardInterrupt as exc:  # one the command did not report itself (e.g. while parsing)
             report = exc.report() if hasattr(exc, "report") else "interrupted; nothing was written"
             print(f"{prog}: {report}", file=sys.stderr)
@@ -142,10 +142,19 @@ def run_checked(prog: str, load_main) -> int:
             sys.stdout.flush()
             sys.stderr.flush()
             os._exit(130)
+        if received and status == 0:
+            # A library swallowed the KeyboardInterrupt (an optional import that fails "cleanly")
+            # and the command ran to its end: say so, and still end as interrupted.
+            print(f"{prog}: interrupted, but the command had already finished (its outputs are complete)",
+                  file=sys.stderr)
+            return 130
+        return status
     finally:
         if in_main_thread:
+            # After an interrupt, a redelivered signal may still be pending: it must not kill the
+            # process on its way out with the default handler.
             for signum, handler in previous.items():
-                signal.signal(signum, handler)
+                signal.signal(signum, signal.SIG_IGN if received else handler)
             sys.unraisablehook = previous_hook
 
 

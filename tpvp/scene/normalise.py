@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from tpvp.errors import ConfigError, PointCloudError, checked_cloud
+from tpvp.io.units import length
 from tpvp.scene import voxels
 
 
@@ -62,8 +63,6 @@ def _bounds(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def _span(size_m: float, choice) -> str:
     """A size in metres as the user gave it: in the file's units (``choice.used``) when known."""
-    from tpvp.io.units import length
-
     if choice is None:
         return length(1e3 * size_m, "mm")
     return length(size_m * (1e3 if choice.used == "mm" else 1.0), choice.used)
