@@ -19,7 +19,7 @@ from tpvp.scene.samples import load_sample, sample_path
 from tpvp.scene.simulator import observation
 from tpvp.sensor.camera import D435
 from tpvp.session import Session
-from tpvp.session.standin import StandInCamera
+from tpvp.session.standin import RowStandInCamera, StandInCamera
 
 CASES = [(space, initial) for space in ("hemisphere", "sphere") for initial in (17, 8, 21)]
 
@@ -59,6 +59,32 @@ def test_the_session_plans_what_the_simulator_plans(tmp_path, pair, space, initi
     assert planned.planned_views == simulated.planned_views
     assert abs(planned.path_length - simulated.path_length) <= 1e-9
     assert Session.open(tmp_path / "session").state["plan"]["planned_views"] == simulated.planned_views
+
+
+@pytest.mark.parametrize("kind", ["cloud", "depth"])
+def test_a_row_session_plans_what_the_simulator_plans(tmp_path, kind):
+    from tpvp.config import load_config
+    from tpvp.experiments.greenhouse import run_row_case
+    from tpvp.experiments.rows import QUICK, RowCase
+
+    config = load_config("paper-row", {**QUICK, "view_space": "room1",
+                                       **({"sensor.model": "pixel"} if kind == "depth" else {})})
+    previous, current = RowCase("room1", 0, 0).load()
+    camera = RowStandInCamera(previous, current, config, cache_dir=tmp_path / "oracles")
+    simulated = run_row_case(camera.scene, config)
+    session = Session.start(tmp_path / "session", previous, config, "generated room1 row, session 0")
+    while (request := session.request()).view is not None:
+        assert request.role.startswith("passive sweep view")
+        if kind == "depth":
+            session.add_depth(camera.depth(request.position, request.look_at), D435, request.view, "depth")
+        else:
+            session.add(camera.cloud(request.position, request.look_at), request.view, "cloud")
+    assert len(session.captures) == 15
+    planned = session.plan()
+    assert np.array_equal(planned.positions, simulated.positions)
+    assert np.array_equal(planned.look_ats, simulated.look_ats)
+    assert abs(planned.path_length - simulated.path_length) <= 1e-9
+    assert session.request().role == f"planned view 1 of {len(simulated.selected)}"
 
 
 def test_the_exported_model_is_the_simulators_fused_model(tmp_path, pair):
@@ -128,7 +154,7 @@ def test_a_capture_in_another_frame(started, tmp_path, pair, capsys):
     write_point_cloud(capture, 1e3 * (StandInCamera(*pair, make_config("plant")).cloud(17) + [2.0, 0.0, 0.0]))
     _refused(["session", "add", started, "--cloud", capture], started, capsys,
              "shifted.ply: 100 % of the capture's points lie away from the previous model",
-             "m from its centre, the plant is 0.0462 m across", "must be in the previous model's frame and units")
+             "m from its centre, the model is 0.0462 m across", "must be in the previous model's frame and units")
 
 
 def test_a_depth_image_of_another_size(started, tmp_path, capsys):
@@ -186,3 +212,39 @@ def test_the_world_frame_is_the_previous_models(started):
     centre = 0.5 * (previous.min(axis=0) + previous.max(axis=0))
     assert np.isclose(np.linalg.norm(request.position - centre), 0.4, atol=1e-9)  # 0.4 m around the real plant
     assert Path(started / "config.yaml").read_text().count("frame: previous") == 1
+
+
+def test_a_session_folder_is_not_started_twice(started, tmp_path, pair, capsys):
+    previous = tmp_path / "previous.xyz"
+    np.savetxt(previous, 1e3 * pair[0][::4])
+    _refused(["session", "start", "--previous", previous, "--output", started], started, capsys,
+             "already holds a session: continue it")
+
+
+def test_a_real_session_plans_at_the_true_size(tmp_path, capsys):
+    assert main(["session", "start", "--previous", str(sample_path("tomato_0305")), "--scale", "normalised",
+                 "--output", str(tmp_path / "s")]) == 2
+    assert "a real session plans at the plant's true size" in capsys.readouterr().err
+    assert not (tmp_path / "s").exists()
+
+
+def test_a_plan_csv_row_is_a_pose_file(tmp_path):
+    from tpvp.session import read_pose_file
+
+    plan = tmp_path / "plan.csv"
+    plan.write_text("# frame: world\nstep,role,x,y,z,look_x,look_y,look_z,qx,qy,qz,qw\n"
+                    "0,planned,0.1,0.2,0.3,0,0,0,0,0,0,1\n")
+    pose = read_pose_file(plan)
+    assert pose.position.tolist() == [0.1, 0.2, 0.3] and pose.look_at.tolist() == [0, 0, 0]
+
+
+def test_a_row_session_from_the_command_line(tmp_path, capsys):
+    from tpvp.experiments.rows import RowCase
+
+    previous = tmp_path / "row.ply"
+    write_point_cloud(previous, RowCase("room1", 0, 0).load()[0])
+    assert main(["session", "start", "--previous", str(previous), "--units", "m", "--view-space", "room1",
+                 "--output", str(tmp_path / "s")]) == 0
+    out = capsys.readouterr().out
+    assert "15 views to capture first or plan from (room1, the room's frame)" in out
+    assert "next: capture view 0 (passive sweep view 1 of 15)" in out

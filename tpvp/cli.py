@@ -370,13 +370,19 @@ def _session_parser(sub, common) -> None:
 
 
 def _session_start(args) -> int:
+    if args.scale == "normalised":
+        raise TpvpError("--scale normalised: a real session plans at the plant's true size (the candidate views "
+                        "are metres around it); leave --scale out")
+    if args.view_space in ROOMS and args.config == "paper":
+        args.config = "paper-row"  # a room's view space is a greenhouse row's
     config = _config(args)
     previous, units = read_point_cloud(args.previous, units=args.units, return_units=True)
     session = Session.start(args.output, previous, config, str(args.previous), units=units.used)
-    space = session.scene.view_space
-    print(f"{args.previous.name}: units: {units}; session {args.output}: {len(space)} candidate views "
-          f"({config.view_space}, {session.config.scene.radius or NATIVE_RADIUS:g} m around the plant), world frame = "
-          f"the previous model's")
+    positions, _ = session.views()
+    where = (f"{config.view_space}, the room's frame" if session.kind == "row" else
+             f"{config.view_space}, {session.config.scene.radius or NATIVE_RADIUS:g} m around the plant")
+    print(f"{args.previous.name}: units: {units}; session {args.output}: {len(positions)} views to capture first or "
+          f"plan from ({where}); world frame = the previous model's")
     print(session.request().describe())
     return 0
 
@@ -406,16 +412,21 @@ def _session_plan(args) -> int:
     if args.coverage_target is not None:
         overrides["selection.coverage_target"] = args.coverage_target
     result = session.plan(overrides)
-    print(f"  views (captures included)         {result.n_views} ({len(result.executed_views)} captured, "
-          f"{len(result.planned_views)} planned: {', '.join(map(str, result.planned_views))})")
+    planned = session.state["plan"]["planned_views"]
+    print(f"  views (captures included)         {result.n_views} ({result.n_views - len(planned)} captured, "
+          f"{len(planned)} planned: {_views_listed(planned)})")
     print(f"  path length                       {result.path_length / session.scene.scan_scale:.3f} m (world frame)")
     timings = result.timings
     print("  time: " + ", ".join(f"{k} {timings[k]:.2f} s" for k in ("registration", "inflation", "visibility",
                                                                       "selection", "path")))
-    print(f"wrote {args.folder / 'plan'}/ (plan.csv in the world frame, plan.json, plan_normalised.csv, results, "
-          f"plan.png, recording.rrd); {session.request().describe()}")
+    print(f"wrote {args.folder / 'plan'}/ (plan.csv and plan.json in the world frame, results, plan.png, "
+          f"recording.rrd); {session.request().describe()}")
     _print_warnings(result.warnings)
     return 0
+
+
+def _views_listed(views, shown: int = 12) -> str:
+    return ", ".join(map(str, views[:shown])) + (f", ... ({len(views)} in all)" if len(views) > shown else "")
 
 
 def _session_export(args) -> int:

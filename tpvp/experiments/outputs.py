@@ -101,8 +101,9 @@ def write_case_outputs(folder, scene, result, config, name: str = "case", extra_
     shown = scene.current if simulated else result.clouds["coarse"]
     figures = [plot_plan(folder / "plan.png", shown, space.positions, executed, space.positions[result.planned_views],
                          polyline, f"{name}: {result.n_views} views"
-                         + (f", {100 * result.coverage:.2f}% coverage" if simulated else "")
-                         + f", {result.path_length:.2f} m path", obstacle=result.obstacle,
+                         + (f", {100 * result.coverage:.2f}% coverage, {result.path_length:.2f} m path" if simulated
+                            else f", {result.path_length / scene.scan_scale:.3g} m path in the world frame "
+                                 f"(drawn in the planning frame)"), obstacle=result.obstacle,
                          table_points=scene.table_points if len(scene.table_points) else None)]
     if simulated:
         plant = scene.grid.countable
@@ -137,22 +138,27 @@ def write_row_case_outputs(folder, scene, result, config, name: str = "row case"
     table.insert(1, "candidate_position", [-1] * len(room.initial_positions)
                  + result.candidates.position_ids[result.selected].tolist())
     plans = write_plan(folder, {"world": table}, {"world": f"{room.room} world frame (the room's boxes; metres)"})
+    simulated = scene.grid is not None  # a real session's scene has no ground truth
+    truth = {"oracle_voxels": int(len(scene.oracle)), "oracle_from_cache": scene.oracle_cached} if simulated else {}
     summary = {"name": name, "configuration": config.name, "room": room.room,
-               "cover_resolution_m": config.selection.cover_resolution, "oracle_voxels": int(len(scene.oracle)),
-               "oracle_from_cache": scene.oracle_cached, **result.summary(), **(extra_summary or {})}
+               "cover_resolution_m": config.selection.cover_resolution, **truth,
+               **{k: v for k, v in result.summary().items() if simulated or not k.startswith("coverage")},
+               **(extra_summary or {})}
     atomic_write_text(folder / "results.json", json.dumps(summary, indent=2, default=float) + "\n")
     atomic_write_text(folder / "results.csv", pd.DataFrame([summary]).to_csv(index=False))
     atomic_write_text(folder / "config.yaml", config_yaml(config, "resolved configuration of this run; "
                                                           "re-run with: tpvp greenhouse --config config.yaml"))
     atomic_write_text(folder / "provenance.json", json.dumps(provenance(config, {"seed": config.seed}), indent=2) + "\n")
-    plan_png = plot_row_paths(folder / "plan.png", room.plant_box, scene.current,
+    coverage = f"{100 * result.coverage:.2f} % coverage, " if simulated else ""
+    plan_png = plot_row_paths(folder / "plan.png", room.plant_box, scene.current if simulated else scene.coarse,
                               {"Ours": (result.positions, f"{result.n_views} views (15 passive), "
-                                        f"{100 * result.coverage:.2f} % coverage, {result.path_length:.1f} m")},
+                                        f"{coverage}{result.path_length:.1f} m")},
                               f"{name}: planned path (plant-box frame)")
     transfer = result.transfer
+    truth_cloud = {"current_truth": (scene.current, (120, 120, 120))} if simulated else {}
     rrd = write_recording(
         folder / "recording.rrd",
-        clouds={"current_truth": (scene.current, (120, 120, 120)), "previous": (scene.previous, (220, 60, 60)),
+        clouds={**truth_cloud, "previous": (scene.previous, (220, 60, 60)),
                 "coarse": (transfer.coarse, (40, 90, 220)), "transferred": (transfer.alignment.warped, (230, 140, 30)),
                 "inflation": (transfer.inflation.inflation, (40, 180, 60))},
         cameras={"passive_views": (room.initial_positions, room.initial_look_ats),

@@ -1,7 +1,10 @@
-"""Real sessions: plan today's views from the previous session's model and the robot's first captures."""
+"""Real sessions: plan today's views from the previous session's model and the robot's first
+captures (single plants and greenhouse rows), no ground truth."""
 
 from tpvp.session.captures import Pose, back_project, read_depth, read_intrinsics, read_pose_file
-from tpvp.session.plant import Request, Session, SessionScene, session_config
+from tpvp.session.folder import Request, Session
+from tpvp.session.plant import PlantSession, SessionScene
+from tpvp.session.row import RowSession
 
-__all__ = ["Pose", "Request", "Session", "SessionScene", "back_project", "read_depth", "read_intrinsics",
-           "read_pose_file", "session_config"]
+__all__ = ["PlantSession", "Pose", "Request", "RowSession", "Session", "SessionScene", "back_project", "read_depth",
+           "read_intrinsics", "read_pose_file"]

@@ -130,8 +130,9 @@ class Pose:
 
 
 def read_pose_file(path) -> Pose:
-    """A pose from a JSON file ``{"position": [x, y, z], "look_at": [x, y, z]}`` or a one-row CSV
-    with ``x,y,z,look_at_x,look_at_y,look_at_z`` (as ``plan.csv`` writes them), world frame."""
+    """A pose from a JSON file ``{"position": [x, y, z], "look_at": [x, y, z]}`` or the first row
+    of a CSV with ``x,y,z`` and ``look_x,look_y,look_z`` (``plan.csv``'s columns) or
+    ``look_at_x,look_at_y,look_at_z``; world frame, metres."""
     path = Path(path)
     try:
         text = path.read_text()
@@ -147,11 +148,12 @@ def read_pose_file(path) -> Pose:
 
             row = pd.read_csv(StringIO(text), comment="#").iloc[0]
             position = [row["x"], row["y"], row["z"]]
-            look_at = [row["look_at_x"], row["look_at_y"], row["look_at_z"]]
+            prefix = "look_" if "look_x" in row.index else "look_at_"
+            look_at = [row[f"{prefix}x"], row[f"{prefix}y"], row[f"{prefix}z"]]
         pose = Pose(np.asarray(position, dtype=np.float64).reshape(3), np.asarray(look_at, dtype=np.float64).reshape(3))
     except (KeyError, IndexError, ValueError, TypeError, json.JSONDecodeError):
         raise InputFileError(f"{path}: a pose file is JSON {{\"position\": [x, y, z], \"look_at\": [x, y, z]}} or a "
-                             f"CSV row with x,y,z,look_at_x,look_at_y,look_at_z (world frame, metres)") from None
+                             f"CSV whose first row has x,y,z and look_x,look_y,look_z (world frame, metres)") from None
     if not (np.all(np.isfinite(pose.position)) and np.all(np.isfinite(pose.look_at))):
         raise InputFileError(f"{path}: the pose has NaN or infinite coordinates")
     if np.allclose(pose.position, pose.look_at):

@@ -15,7 +15,9 @@ import numpy as np
 
 from tpvp.scene.simulator import build_scene, observation
 from tpvp.sensor.sensor import depth_image
-from tpvp.session.plant import session_config
+from tpvp.experiments.greenhouse import build_row_scene
+from tpvp.session.plant import PlantSession
+from tpvp.visibility import safe_visibility
 
 
 class StandInCamera:
@@ -23,7 +25,7 @@ class StandInCamera:
     session planning on ``previous`` under ``config``."""
 
     def __init__(self, previous, current, config, names=("previous model", "today's scan")):
-        self.config = session_config(config)
+        self.config = PlantSession.session_config(config)
         self.scene = build_scene(previous, current, self.config, names)
 
     def _to_world(self, points) -> np.ndarray:
@@ -41,5 +43,29 @@ class StandInCamera:
         sensor = replace(self.scene.sensor, model="pixel", pixel_stride=1)
         depth, _ = depth_image(self.scene.grid, space.positions[view], space.look_ats[view], sensor)
         depth = depth / self.scene.scan_scale
+        depth[~np.isfinite(depth)] = np.nan
+        return depth
+
+
+class RowStandInCamera:
+    """Renders captures of ``current`` (today's row, the room's frame) at any pose, for a row
+    session planning on ``previous`` under ``config`` (the simulator's row scene; its oracle is
+    cached in ``cache_dir``)."""
+
+    def __init__(self, previous, current, config, names=("previous row", "today's row"), cache_dir=None):
+        self.config = config
+        self.scene = build_row_scene(previous, current, config, names, cache_dir=cache_dir)
+
+    def cloud(self, position, look_at) -> np.ndarray:
+        """The voxel centres the pose observes of today's row (room frame)."""
+        seen = safe_visibility(self.scene.grid, np.reshape(position, (1, 3)), np.reshape(look_at, (1, 3)),
+                               self.scene.sensor)
+        return self.scene.grid.centres[seen[0].indices]
+
+    def depth(self, position, look_at) -> np.ndarray:
+        """The depth image (metres, NaN where nothing is seen) of the pose, every pixel."""
+        sensor = replace(self.scene.sensor, model="pixel", pixel_stride=1)
+        depth, _ = depth_image(self.scene.grid, np.asarray(position, dtype=np.float64),
+                               np.asarray(look_at, dtype=np.float64), sensor)
         depth[~np.isfinite(depth)] = np.nan
         return depth
