@@ -9,7 +9,7 @@ from tpvp.config import make_config
 from tpvp.scene.samples import load_sample
 from tpvp.session import Session
 from tpvp.viz.session import (model_agreement, plot_model_comparison, plot_session_state, plot_session_workflow,
-                              session_state)
+                              request_row, session_state)
 
 PNG = b"\x89PNG\r\n\x1a\n"
 
@@ -47,6 +47,9 @@ def test_session_state_is_in_the_world_frame(tmp_path):
     nearest = np.min(np.linalg.norm(state["captures"][0][:, None] - previous[None, ::10], axis=2), axis=1)
     assert nearest.max() <= np.sqrt(3) / 2 * voxel + 1e-12  # voxel centres of the added points
     assert plot_session_state(tmp_path / "state.png", **state).is_file()
+    row = request_row(session.request())
+    assert row["role"] == "warm-up NBV 1 of 1" and list(row)[2:] == ["x", "y", "z", "look_x", "look_y", "look_z",
+                                                                      "qx", "qy", "qz", "qw"]
 
 
 def test_model_agreement_counts_both_ways():

@@ -19,7 +19,7 @@ import numpy as np
 from tpvp.viz.figures import _equal_axes, _save, _subsample, plt
 
 __all__ = ["model_agreement", "plot_model_comparison", "plot_session_state", "plot_session_workflow",
-           "session_state"]
+           "request_row", "session_state"]
 
 _CAPTURE_COLOURS = plt.get_cmap("tab10").colors
 
@@ -33,6 +33,18 @@ def session_state(session) -> dict:
             "candidates": scene.to_scan(scene.view_space.positions),
             "captures": [scene.to_scan(points) for _, points in session.observations()],
             "capture_views": [int(view) for view, _ in session.observations()]}
+
+
+def request_row(request) -> dict:
+    """A :class:`tpvp.session.Request` as a table row: view, role, position, look-at point and
+    quaternion (camera-to-world, x y z w, OpenCV camera axes), world frame, metres."""
+    row = {"view": request.view, "role": request.role}
+    if request.view is None:
+        return row
+    for name, values, axes in (("", request.position, "xyz"), ("look_", request.look_at, "xyz"),
+                               ("q", request.quaternion, "xyzw")):
+        row.update({f"{name}{axis}": float(value) for axis, value in zip(axes, values)})
+    return row
 
 
 def _legend(ax, **keywords):
@@ -106,18 +118,19 @@ def model_agreement(model, reference, tolerance: float) -> dict:
     """How well ``model`` (e.g. today's exported voxel centres) matches ``reference`` (e.g.
     today's full scan), both (N, 3) in the same frame: ``completeness`` (the share of reference
     points within ``tolerance`` of the model), ``accuracy`` (the share of model points within
-    ``tolerance`` of the reference) and the median nearest distances both ways."""
+    ``tolerance`` of the reference) and the median nearest distances both ways (in millimetres:
+    the points are in metres)."""
     from scipy.spatial import cKDTree
 
     model = np.asarray(model, dtype=np.float64).reshape(-1, 3)
     reference = np.asarray(reference, dtype=np.float64).reshape(-1, 3)
     to_model, _ = cKDTree(model).query(reference)
     to_reference, _ = cKDTree(reference).query(model)
-    return {"model points": len(model), "reference points": len(reference), "tolerance (m)": float(tolerance),
+    return {"model points": len(model), "reference points": len(reference), "tolerance (mm)": 1e3 * float(tolerance),
             "completeness": float(np.mean(to_model <= tolerance)),
             "accuracy": float(np.mean(to_reference <= tolerance)),
-            "median reference -> model (m)": float(np.median(to_model)),
-            "median model -> reference (m)": float(np.median(to_reference))}
+            "median reference -> model (mm)": 1e3 * float(np.median(to_model)),
+            "median model -> reference (mm)": 1e3 * float(np.median(to_reference))}
 
 
 def plot_model_comparison(path, model, reference, previous=None, tolerance: float | None = None,
@@ -148,7 +161,7 @@ def plot_model_comparison(path, model, reference, previous=None, tolerance: floa
                        linewidths=0, label=f"{name} ({len(points):,} points)" if last else None)
             if last and missed.any():
                 (red,) = _subsample(reference[missed], limit=5000)
-                ax.scatter(red[:, pair[0]], red[:, pair[1]], s=1.5, color="red", linewidths=0,
+                ax.scatter(red[:, pair[0]], red[:, pair[1]], s=1.0, color="red", linewidths=0,
                            label=f"{names[1]} farther than {1000 * tolerance:.2g} mm ({int(missed.sum()):,})")
             ax.set_aspect("equal", adjustable="datalim")
             ax.set_xlabel(labels[0], fontsize=8)
