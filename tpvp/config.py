@@ -39,6 +39,7 @@ from tpvp.viewspace import get_view_space
 
 SCALES = ("normalised", "native")
 UP_AXES = ("+z", "-z", "+y", "-y", "+x", "-x")
+FRAMES = ("current", "previous")  # the scan that defines the planning frame
 PAPER_NOISE_LEVELS = ((0.0, 0.0), (0.002, 0.5), (0.005, 1.0), (0.01, 2.0))  # Table VII: (sigma_t m, sigma_r deg)
 ICP_METHODS = ("point_to_plane", "point_to_point")
 
@@ -53,6 +54,9 @@ class SceneConfig:
     radius: view-sphere radius; None keeps the view space's own (0.4 m) in normalised mode and means
     0.4 m around the real plant in native mode. table: None = the view space's choice.
     up_axis: the scan axis that points up; the plant is turned so that it becomes +Z.
+    frame: the scan that defines the planning frame (scale, centre, table): ``current`` (the
+    paper's protocol: today's full scan) or ``previous`` (the previous session's model: all a real
+    session has before planning, see ``tpvp session``).
     reduce_above / reduce_resolution: scans with more points are reduced to voxel centroids at
     ``reduce_resolution`` (planning frame; half the ground-truth voxel, so the ground truth
     is unchanged) before anything else. min_plant_voxels: fewer occupied ground-truth voxels than
@@ -68,6 +72,7 @@ class SceneConfig:
     scale: str = "normalised"
     radius: float | None = None
     up_axis: str = "+z"
+    frame: str = "current"
     reduce_above: int = 1_000_000
     reduce_resolution: float = 0.001
     min_plant_voxels: int = 100
@@ -84,6 +89,8 @@ class SceneConfig:
             raise ConfigError(f"scene.scale must be one of {', '.join(SCALES)}, got {self.scale!r}")
         if self.up_axis not in UP_AXES:
             raise ConfigError(f"scene.up_axis must be one of {', '.join(UP_AXES)}, got {self.up_axis!r}")
+        if self.frame not in FRAMES:
+            raise ConfigError(f"scene.frame must be one of {', '.join(FRAMES)}, got {self.frame!r}")
 
 
 @dataclass(frozen=True)

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import time
 from contextlib import contextmanager
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -67,7 +67,8 @@ class RowScene:
                             None if transferred is None else transferred.inflation.inflation, self.date)
 
 
-def _check_row(points, name: str, room) -> None:
+def check_row(points, name: str, room) -> None:
+    """Refuse a row that is not where its room expects it (outside the plant box, or in the view box)."""
     inside = room.plant_box.contains(points, tol=BOX_TOLERANCE)
     if inside.mean() < MIN_INSIDE_PLANT_BOX:
         raise PointCloudError(
@@ -94,7 +95,7 @@ def build_row_scene(previous_points, current_points, config: RowConfig = RowConf
     previous = checked_cloud(previous_points, names[0])
     current = checked_cloud(current_points, names[1])
     for points, name in ((previous, names[0]), (current, names[1])):
-        _check_row(points, name, room_cfg)
+        check_row(points, name, room_cfg)
     resolution = config.gt_resolution
     grid = build_grid(voxels.voxelise(current, resolution), resolution)
     # The previous session feeds registration only: its voxel centroids keep its voxel set.
@@ -277,6 +278,18 @@ def run_row_case(scene: RowScene, config: RowConfig = RowConfig(), progress=None
     """Ours on one row pair, one block per stage: transfer, the transfer prior's candidates, their
     visibility on the planning surface, set cover with the passive views as executed, band path from
     the end of the passive sweep, execution. ``transferred``: :func:`row_transfer` of this scene."""
+    result = plan_row_case(scene, config, progress, transferred)
+    timings = dict(result.timings)
+    with timed(timings, "execution", progress or (lambda stage: None), "execution"):
+        coverage = row_coverage(scene, execute(scene, result.positions, result.look_ats))
+    return replace(result, coverage=coverage, coverage_passive=row_coverage(scene, []), timings=timings)
+
+
+def plan_row_case(scene, config: RowConfig = RowConfig(), progress=None,
+                  transferred: RowTransfer | None = None) -> RowCaseResult:
+    """:func:`run_row_case` without the execution: the coverages are NaN (a real session has no
+    ground truth). ``scene`` needs the room, the previous session, the coarse reconstruction and
+    its passive cameras, the sensor, names and timings."""
     say = progress or (lambda stage: None)
     transferred = transferred or row_transfer(scene, config, progress)
     timings = dict(scene.timings) | dict(transferred.timings)
@@ -294,9 +307,7 @@ def run_row_case(scene: RowScene, config: RowConfig = RowConfig(), progress=None
         path, length = plan_path(scene, candidates.positions[chosen], config.path)
         selected = chosen[path.order]
     timings["planning"] = sum(timings[k] for k in PLANNING_STAGES)
-    with timed(timings, "execution", say, "execution"):
-        coverage = row_coverage(scene, execute(scene, candidates.positions[selected], candidates.look_ats[selected]))
-    return RowCaseResult(candidates, selected, path, coverage, row_coverage(scene, []),
+    return RowCaseResult(candidates, selected, path, float("nan"), float("nan"),
                          visibility.n_passive + len(selected), length, selection, transferred,
                          visibility.planning_voxels, timings, path_warnings(path, config.path))
 

@@ -17,7 +17,7 @@ from tpvp.io.plan import plan_table, write_plan
 from tpvp.provenance import provenance
 from tpvp.sensor.camera import look_at_rotations, rotation_to_quaternion
 from tpvp.viz import plot_coverage, plot_plan, write_recording
-from tpvp.viz.geometry import plan_geometry
+from tpvp.viz.geometry import path_polyline, plan_geometry
 from tpvp.viz.interactive import scene_3d
 from tpvp.viz.rows import plot_row_paths
 
@@ -67,19 +67,22 @@ def plan_3d(scene, result, title: str = ""):
 
 def write_case_outputs(folder, scene, result, config, name: str = "case", extra_summary: dict | None = None) -> dict:
     """Results (JSON + CSV), the plan in both frames, ``config.yaml`` + ``provenance.json``, PNG
-    figures and a rerun ``.rrd`` in ``folder``."""
+    figures and a rerun ``.rrd`` in ``folder``. A real session's scene (no ground truth: no
+    ``grid``) has no coverage to report: its plan figure shows what was captured instead."""
     folder = Path(folder)
+    simulated = getattr(scene, "grid", None) is not None
     order = result.order
     roles = ["initial"] + ["warm-up NBV"] * (len(result.executed_views) - 1) + ["planned"] * len(result.planned_views)
     tables, frames, extra = plan_frames(scene, order, roles)
     plans = write_plan(folder, tables, frames, extra)
 
     summary = {"name": name, "configuration": config.name, "view_space": config.view_space,
-               "initial_view": order[0], "oracle_voxels": int(len(scene.oracle)),
+               "initial_view": order[0], **({"oracle_voxels": int(len(scene.oracle))} if simulated else {}),
                "scale_planning_per_scan_m": scene.scan_scale,
                "path_length_scan_m": result.path_length / scene.scan_scale,
                **{f"scan_{k}": v for k, v in (scene.reduction or {}).items()},
-               **result.summary(), **(extra_summary or {})}
+               **{k: v for k, v in result.summary().items() if simulated or not k.startswith("coverage")},
+               **(extra_summary or {})}
     atomic_write_text(folder / "results.json", json.dumps(summary, indent=2, default=float) + "\n")
     atomic_write_text(folder / "results.csv", pd.DataFrame([summary]).to_csv(index=False))
     atomic_write_text(folder / "config.yaml", config_yaml(config, "resolved configuration of this run; "
@@ -87,20 +90,30 @@ def write_case_outputs(folder, scene, result, config, name: str = "case", extra_
     seeds = {"registration": getattr(config.registration.embedded_deformation, "seed", None)}
     atomic_write_text(folder / "provenance.json", json.dumps(provenance(config, seeds), indent=2) + "\n")
 
-    geometry = plan_geometry(scene, result)
-    space, positions, polyline = scene.view_space, geometry["positions"], geometry["polyline"]
-    plan_png = plot_plan(folder / "plan.png", scene.current, space.positions, space.positions[result.executed_views],
-                         space.positions[result.planned_views], polyline,
-                         f"{name}: {result.n_views} views, {100 * result.coverage:.2f}% coverage, "
-                         f"{result.path_length:.2f} m path", obstacle=result.obstacle,
-                         table_points=scene.table_points if len(scene.table_points) else None)
-    plant = scene.grid.countable
-    coverage_png = plot_coverage(folder / "coverage.png", scene.grid.centres[plant], geometry["covered"][plant],
-                                 geometry["observable"][plant], f"{name}: ground-truth voxels "
-                                 f"({1e3 * config.gt_resolution:g} mm, planning frame)")
+    space = scene.view_space
+    executed = space.positions[result.executed_views]
+    if simulated:
+        geometry = plan_geometry(scene, result)
+        positions, polyline = geometry["positions"], geometry["polyline"]
+    else:
+        positions = space.positions[order]
+        polyline = path_polyline(positions, *result.obstacle)
+    shown = scene.current if simulated else result.clouds["coarse"]
+    figures = [plot_plan(folder / "plan.png", shown, space.positions, executed, space.positions[result.planned_views],
+                         polyline, f"{name}: {result.n_views} views"
+                         + (f", {100 * result.coverage:.2f}% coverage, {result.path_length:.2f} m path" if simulated
+                            else f", {result.path_length / scene.scan_scale:.3g} m path in the world frame "
+                                 f"(drawn in the planning frame)"), obstacle=result.obstacle,
+                         table_points=scene.table_points if len(scene.table_points) else None)]
+    if simulated:
+        plant = scene.grid.countable
+        figures.append(plot_coverage(folder / "coverage.png", scene.grid.centres[plant], geometry["covered"][plant],
+                                     geometry["observable"][plant], f"{name}: ground-truth voxels "
+                                     f"({1e3 * config.gt_resolution:g} mm, planning frame)"))
+    clouds = {"current_truth": (scene.current, (120, 120, 120))} if simulated else {}
     rrd = write_recording(
         folder / "recording.rrd",
-        clouds={"current_truth": (scene.current, (120, 120, 120)), "previous": (result.clouds["previous"], (220, 60, 60)),
+        clouds={**clouds, "previous": (result.clouds["previous"], (220, 60, 60)),
                 "coarse": (result.clouds["coarse"], (40, 90, 220)), "transferred": (result.clouds["warped"], (230, 140, 30)),
                 "inflation": (result.clouds["inflation"], (40, 180, 60))},
         cameras={"warm_up_views": (positions[:len(result.executed_views)], space.look_ats[result.executed_views]),
@@ -108,7 +121,7 @@ def write_case_outputs(folder, scene, result, config, name: str = "case", extra_
         paths={"global_path": polyline})
     return {"results": folder / "results.json", "plan": plans["scan"], "plan_normalised": plans["normalised"],
             "plan_json": plans["json"], "config": folder / "config.yaml", "provenance": folder / "provenance.json",
-            "figures": [plan_png, coverage_png], "recording": rrd}
+            "figures": figures, "recording": rrd}
 
 
 def write_row_case_outputs(folder, scene, result, config, name: str = "row case", extra_summary: dict | None = None) -> dict:
@@ -125,22 +138,27 @@ def write_row_case_outputs(folder, scene, result, config, name: str = "row case"
     table.insert(1, "candidate_position", [-1] * len(room.initial_positions)
                  + result.candidates.position_ids[result.selected].tolist())
     plans = write_plan(folder, {"world": table}, {"world": f"{room.room} world frame (the room's boxes; metres)"})
+    simulated = scene.grid is not None  # a real session's scene has no ground truth
+    truth = {"oracle_voxels": int(len(scene.oracle)), "oracle_from_cache": scene.oracle_cached} if simulated else {}
     summary = {"name": name, "configuration": config.name, "room": room.room,
-               "cover_resolution_m": config.selection.cover_resolution, "oracle_voxels": int(len(scene.oracle)),
-               "oracle_from_cache": scene.oracle_cached, **result.summary(), **(extra_summary or {})}
+               "cover_resolution_m": config.selection.cover_resolution, **truth,
+               **{k: v for k, v in result.summary().items() if simulated or not k.startswith("coverage")},
+               **(extra_summary or {})}
     atomic_write_text(folder / "results.json", json.dumps(summary, indent=2, default=float) + "\n")
     atomic_write_text(folder / "results.csv", pd.DataFrame([summary]).to_csv(index=False))
     atomic_write_text(folder / "config.yaml", config_yaml(config, "resolved configuration of this run; "
                                                           "re-run with: tpvp greenhouse --config config.yaml"))
     atomic_write_text(folder / "provenance.json", json.dumps(provenance(config, {"seed": config.seed}), indent=2) + "\n")
-    plan_png = plot_row_paths(folder / "plan.png", room.plant_box, scene.current,
+    coverage = f"{100 * result.coverage:.2f} % coverage, " if simulated else ""
+    plan_png = plot_row_paths(folder / "plan.png", room.plant_box, scene.current if simulated else scene.coarse,
                               {"Ours": (result.positions, f"{result.n_views} views (15 passive), "
-                                        f"{100 * result.coverage:.2f} % coverage, {result.path_length:.1f} m")},
+                                        f"{coverage}{result.path_length:.1f} m")},
                               f"{name}: planned path (plant-box frame)")
     transfer = result.transfer
+    truth_cloud = {"current_truth": (scene.current, (120, 120, 120))} if simulated else {}
     rrd = write_recording(
         folder / "recording.rrd",
-        clouds={"current_truth": (scene.current, (120, 120, 120)), "previous": (scene.previous, (220, 60, 60)),
+        clouds={**truth_cloud, "previous": (scene.previous, (220, 60, 60)),
                 "coarse": (transfer.coarse, (40, 90, 220)), "transferred": (transfer.alignment.warped, (230, 140, 30)),
                 "inflation": (transfer.inflation.inflation, (40, 180, 60))},
         cameras={"passive_views": (room.initial_positions, room.initial_look_ats),

@@ -9,7 +9,7 @@ the current session's ground truth. Every stage's method is chosen by name in th
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy import sparse
@@ -111,13 +111,15 @@ class Transfer:
     warnings: list
 
 
-def transfer(scene: Scene, config: PlantConfig = PlantConfig(), progress=None) -> Transfer:
-    """Initial view, warm-up NBVs and registration of the previous session onto what they saw."""
+def transfer(scene: Scene, config: PlantConfig = PlantConfig(), progress=None, nbv=None) -> Transfer:
+    """Initial view, warm-up NBVs and registration of the previous session onto what they saw.
+    ``nbv``: the NBV method holding views already executed (a real session's captures); then no
+    view is rendered and ``scene`` needs only its view space, sensor, previous session and names."""
     say = progress or (lambda stage: None)
     timings = {}
     t = time.perf_counter()
     say("warm-up NBV")
-    nbv = warm_up(scene, config)
+    nbv = nbv or warm_up(scene, config)
     coarse = np.concatenate(nbv.observations)
     timings["warm_up"] = time.perf_counter() - t
 
@@ -145,6 +147,17 @@ def run_case(scene: Scene, config: PlantConfig = PlantConfig(), progress=None,
     """Warm-up, transfer, plan and execute one case; ``progress(stage)`` is called per stage.
     ``transferred``: the :func:`transfer` of this scene and configuration when already computed
     (methods that differ only after registration share it)."""
+    result = plan_case(scene, config, progress, transferred)
+    executed, planned = result.executed_views, result.planned_views
+    return replace(result, coverage=coverage_ratio(covered_voxels(scene.truth_visibility, executed + planned),
+                                                   scene.oracle),
+                   coverage_warm_up=coverage_ratio(covered_voxels(scene.truth_visibility, executed), scene.oracle))
+
+
+def plan_case(scene, config: PlantConfig = PlantConfig(), progress=None,
+              transferred: Transfer | None = None) -> CaseResult:
+    """Warm-up, transfer and plan, without executing the plan: the coverages are NaN (a real
+    session has no ground truth to measure them on)."""
     say = progress or (lambda stage: None)
     space = scene.view_space
     centre = np.zeros(3)
@@ -179,9 +192,7 @@ def run_case(scene: Scene, config: PlantConfig = PlantConfig(), progress=None,
 
     return CaseResult(
         executed_views=executed, planned_views=planned,
-        coverage=coverage_ratio(covered_voxels(scene.truth_visibility, executed + planned), scene.oracle),
-        coverage_warm_up=coverage_ratio(covered_voxels(scene.truth_visibility, executed), scene.oracle),
-        n_views=len(executed) + len(planned), path_length=path_length,
+        coverage=float("nan"), coverage_warm_up=float("nan"), n_views=len(executed) + len(planned), path_length=path_length,
         chamfer_before=alignment.chamfer_before, chamfer_after=alignment.chamfer_after,
         selection=selection, tsp=tsp, timings=timings,
         clouds={"coarse": np.unique(coarse, axis=0), "previous": scene.previous,

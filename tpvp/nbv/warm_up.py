@@ -10,12 +10,17 @@ from tpvp.nbv.methods import NbvContext, make_nbv
 from tpvp.scene.simulator import observation
 
 
+def start_nbv(scene, config):
+    """The configured NBV method on ``scene``'s view space and sensor, nothing executed yet (its
+    ``prior`` is the previous session in the planning frame)."""
+    return make_nbv(NbvContext(scene.view_space, np.zeros(3), scene.sensor, config.nbv, prior=scene.previous))
+
+
 def warm_up(scene, config):
     """The initial view and ``config.nbv.warm_up_views`` NBVs executed: the NBV method, holding
     the executed views and their observations."""
-    space = scene.view_space
-    initial = space.view_index(config.initial_view)
-    nbv = make_nbv(NbvContext(space, np.zeros(3), scene.sensor, config.nbv, prior=scene.previous))
+    initial = scene.view_space.view_index(config.initial_view)
+    nbv = start_nbv(scene, config)
     seen = observation(scene, initial)
     if len(seen) == 0:
         raise ConfigError(_initial_sees_nothing(scene, initial, config))

@@ -51,10 +51,55 @@ class Scene:
         return float(np.cbrt(np.linalg.det(self.plant_from_scan[:3, :3])))
 
 
+@dataclass(frozen=True, eq=False)
+class PlanningFrame:
+    """The planning frame of a session pair, fixed by one scan (``scene.frame``): that scan
+    normalised (scale, rotation, centre, supporting table), the up-axis turn before it, and the
+    candidate views and sensor in that frame (scaled with the plant at ``scene.scale = native``)."""
+
+    reference: object  # tpvp.scene.normalise.PlantScene of the reference scan
+    up: np.ndarray  # (3, 3) scan axes -> +Z up
+    view_space: object  # tpvp.viewspace.ViewSpace in the planning frame
+    sensor: object  # SensorConfig in the planning frame
+
+    @property
+    def plant_from_scan(self) -> np.ndarray:
+        """4x4, scale included: ``p_planning = M[:3, :3] @ p_scan + M[:3, 3]``."""
+        matrix = self.reference.matrix
+        matrix[:3, :3] = matrix[:3, :3] @ self.up
+        return matrix
+
+    def to_planning(self, scan_points) -> np.ndarray:
+        """Points of the scan's own frame in the planning frame."""
+        points = np.asarray(scan_points, dtype=np.float64)
+        return self.reference.transform(points if np.array_equal(self.up, np.eye(3)) else points @ self.up.T)
+
+
+def planning_frame(reference_scan, config, name: str = "reference scan") -> PlanningFrame:
+    """The planning frame that ``reference_scan`` (its own frame, metres) defines under ``config``."""
+    up = up_rotation(config.scene.up_axis)
+    scan = checked_cloud(reference_scan, name)
+    if config.scene.up_axis != "+z":
+        scan = scan @ up.T
+    reference = normalise_plant(scan, config.scene.largest_side, config.scene.rotation_deg,
+                                centre=config.scene.centre, table=config.uses_table, name=name,
+                                table_size=config.scene.table_size, table_resolution=config.scene.table_resolution)
+    space, sensor = get_view_space(config.view_space), config.sensor
+    if config.scene.scale == "native":
+        # The plant keeps its size: the view sphere and the sensor range are real metres, so in the
+        # planning frame they scale with the plant like every resolution does.
+        space = space.with_radius((config.scene.radius or NATIVE_RADIUS) * reference.scale)
+        sensor = replace(sensor, max_range=sensor.max_range * reference.scale)
+    elif config.scene.radius is not None:
+        space = space.with_radius(config.scene.radius)
+    return PlanningFrame(reference, up, space, sensor)
+
+
 def build_scene(previous_points, current_points, config,
                 names=("previous-session scan", "current-session scan")) -> Scene:
-    """Bring both sessions into the planning frame defined by the current session (the plant stays
-    in place between sessions) and render the ground truth from every candidate view.
+    """Bring both sessions into the planning frame (defined by the current session, or by the
+    previous one with ``scene.frame = previous``; the plant stays in place between sessions) and
+    render the ground truth from every candidate view.
 
     ``names`` (e.g. the files) name the scans in errors. Scans of more than
     ``scene.reduce_above`` points are reduced to voxel centroids at ``scene.reduce_resolution``;
@@ -63,29 +108,22 @@ def build_scene(previous_points, current_points, config,
     current_scan, previous_scan = (checked_cloud(points, name) for points, name in
                                    ((current_points, names[1]), (previous_points, names[0])))
     if config.scene.up_axis != "+z":
-        current_scan, previous_scan = current_scan @ up.T, previous_scan @ up.T
-    check_session_pair(previous_scan, current_scan, names)
-    space = get_view_space(config.view_space)
-    current = normalise_plant(current_scan, config.scene.largest_side, config.scene.rotation_deg,
-                              centre=config.scene.centre, table=config.uses_table, name=names[1],
-                              table_size=config.scene.table_size, table_resolution=config.scene.table_resolution)
-    sensor = config.sensor
-    if config.scene.scale == "native":
-        # The plant keeps its size: the view sphere and the sensor range are real metres, so in the
-        # planning frame they scale with the plant like every resolution does.
-        space = space.with_radius((config.scene.radius or NATIVE_RADIUS) * current.scale)
-        sensor = replace(sensor, max_range=sensor.max_range * current.scale)
-    elif config.scene.radius is not None:
-        space = space.with_radius(config.scene.radius)
-    grid = plant_grid(current.points, current.table_points, config.gt_resolution)
-    previous = current.transform(previous_scan)
+        check_session_pair(previous_scan @ up.T, current_scan @ up.T, names)
+    else:
+        check_session_pair(previous_scan, current_scan, names)
+    by_previous = config.scene.frame == "previous"
+    frame = planning_frame(previous_scan if by_previous else current_scan, config, names[0 if by_previous else 1])
+    space, sensor, current = frame.view_space, frame.sensor, frame.reference
+    current_points = frame.to_planning(current_scan) if by_previous else current.points
+    grid = plant_grid(current_points, current.table_points, config.gt_resolution)
+    previous = current.points if by_previous else frame.to_planning(previous_scan)
     del previous_scan, current_scan
     reduction = {"resolution_m": config.scene.reduce_resolution, "previous_points": len(previous),
-                 "current_points": len(current.points)}
+                 "current_points": len(current_points)}
     # Centroids lie in their points' voxels, so the reduction keeps the ground-truth voxel sets.
     previous, current_points = (voxels.voxel_centroids(p, config.scene.reduce_resolution)
                                 if len(p) > config.scene.reduce_above else p
-                                for p in (previous, current.points))
+                                for p in (previous, current_points))
     reduction.update(previous_points_used=len(previous), current_points_used=len(current_points))
     for name, points, count in ((names[0], previous, None), (names[1], current_points, int(grid.countable.sum()))):
         count = len(voxels.voxelise(points, config.gt_resolution)) if count is None else count
@@ -98,9 +136,7 @@ def build_scene(previous_points, current_points, config,
     oracle = oracle_voxels(truth)
     if len(oracle) == 0:
         raise ConfigError(_unseen(config, space, sensor, current.scale if config.scene.scale == "native" else 1.0))
-    plant_from_scan = current.matrix
-    plant_from_scan[:3, :3] = plant_from_scan[:3, :3] @ up
-    return Scene(previous, current_points, grid, space, sensor, truth, oracle, plant_from_scan,
+    return Scene(previous, current_points, grid, space, sensor, truth, oracle, frame.plant_from_scan,
                  current.table_points, names, reduction)
 
 

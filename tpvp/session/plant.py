@@ -1,0 +1,138 @@
+"""A real single-plant session: the previous session's model and today's captures, no ground truth.
+
+* ``start`` fixes the planning frame from the previous model (``scene.frame = previous``, the
+  plant at its true size: ``scene.scale = native``), the candidate views around it, and asks for
+  the initial view;
+* ``add`` fuses a capture (a cloud in the world frame, or a depth image and its intrinsics) taken
+  at a candidate view: its voxels (ground-truth resolution, planning frame) join today's coarse
+  reconstruction, and the warm-up NBV (the configured method, free space carved along the rays)
+  asks for the next view until the warm-up is done;
+* ``plan`` runs registration, inflation, visibility, selection and the exact path on what was
+  captured, and writes the plan as ``tpvp plan`` does (``plan/``); the planned views are asked next;
+* ``export`` writes today's fused model (every capture's voxel centres, world frame).
+
+The world frame is the previous model's own (metres after ``--units``). With the same captures,
+the plan equals the simulator's plan of the pair with ``scene.frame = previous`` at native scale
+(``tests/test_session.py`` renders the captures from today's scan at the poses the session asks).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from tpvp.config import PlantConfig, with_overrides
+from tpvp.experiments.outputs import write_case_outputs
+from tpvp.experiments.single_plant import plan_case, transfer
+from tpvp.nbv.warm_up import start_nbv
+from tpvp.scene import voxels
+from tpvp.scene.simulator import planning_frame
+from tpvp.session.folder import KINDS, Request, Session
+
+
+@dataclass(frozen=True, eq=False)
+class SessionScene:
+    """What a real session knows in the planning frame: the simulator's scene without ground truth."""
+
+    previous: np.ndarray
+    view_space: object
+    sensor: object
+    plant_from_scan: np.ndarray
+    table_points: np.ndarray
+    names: tuple
+    reduction: dict = field(default_factory=dict)
+
+    @property
+    def scan_scale(self) -> float:
+        return float(np.cbrt(np.linalg.det(self.plant_from_scan[:3, :3])))
+
+    def to_scan(self, points) -> np.ndarray:
+        """Planning-frame points in the world (the previous model's) frame."""
+        matrix = self.plant_from_scan
+        return (np.asarray(points, dtype=np.float64) - matrix[:3, 3]) @ np.linalg.inv(matrix[:3, :3]).T
+
+    def to_planning(self, points) -> np.ndarray:
+        matrix = self.plant_from_scan
+        return np.asarray(points, dtype=np.float64) @ matrix[:3, :3].T + matrix[:3, 3]
+
+
+class PlantSession(Session):
+    """A single plant: candidate views on a sphere or hemisphere around the previous model."""
+
+    kind = "plant"
+
+    @classmethod
+    def session_config(cls, config: PlantConfig) -> PlantConfig:
+        """``config`` as a real session runs it: the planning frame from the previous model, the
+        plant at its true size (candidate views and sensor range in metres)."""
+        return with_overrides(config, {"scene.frame": "previous", "scene.scale": "native"})
+
+    def _scene(self, previous_scan) -> SessionScene:
+        config, name = self.config, self.state["previous_file"]
+        frame = planning_frame(previous_scan, config, name)
+        frame.view_space.view_index(config.initial_view)  # refuse a bad initial view up front
+        previous = frame.to_planning(previous_scan)
+        reduced = (voxels.voxel_centroids(previous, config.scene.reduce_resolution)
+                   if len(previous) > config.scene.reduce_above else previous)
+        return SessionScene(reduced, frame.view_space, frame.sensor, frame.plant_from_scan,
+                            frame.reference.table_points, (name, "today's captures"),
+                            {"previous_points": len(previous), "previous_points_used": len(reduced)})
+
+    def views(self) -> tuple[np.ndarray, np.ndarray]:
+        space = self.scene.view_space
+        return space.positions, space.look_ats
+
+    def view_index(self, view) -> int:
+        return self.scene.view_space.view_index(int(view) if str(view).lstrip("-").isdigit() else view)
+
+    def nbv(self):
+        """The NBV method with every capture integrated, in order."""
+        nbv = start_nbv(self.scene, self.config)
+        for view, seen in self.observations():
+            nbv.integrate(view, seen)
+        return nbv
+
+    def warm_up_views(self) -> int:
+        """Captures the warm-up takes: the initial view and ``nbv.warm_up_views`` NBVs."""
+        return 1 + self.config.nbv.warm_up_views
+
+    def warm_up_request(self, done: int) -> Request:
+        if done == 0:
+            return self.pose_request(self.scene.view_space.view_index(self.config.initial_view), "initial view")
+        return self.pose_request(int(self.nbv().next_view().view), f"warm-up NBV {done} of {self.warm_up_views() - 1}")
+
+    def _near(self, planning: np.ndarray) -> np.ndarray:
+        """Points within the previous model's box grown by half its largest side on every side."""
+        lo, hi = self.scene.previous.min(axis=0), self.scene.previous.max(axis=0)
+        margin = 0.5 * (hi - lo).max()
+        return np.all((planning >= lo - margin) & (planning <= hi + margin), axis=1)
+
+    def _keep(self, keys: np.ndarray) -> np.ndarray:
+        """The voxels that reach above the supporting table's top, when the view space has a
+        table: it occludes but is not the plant, as in the simulator."""
+        table = self.scene.table_points
+        if not len(table):
+            return keys
+        top = table[:, 2].max() + 0.5 * self.config.scene.table_resolution
+        resolution = self.config.gt_resolution
+        return keys[(keys[:, 2] + 1) * resolution > top + 1e-9 * resolution]
+
+    def plan(self, overrides: dict | None = None, progress=None):
+        """Plan on the captures (``overrides``: configuration keys for this plan, e.g. the
+        coverage target): writes ``plan/`` as ``tpvp plan`` writes its folder (the world frame is
+        the scan frame) and returns the :class:`~tpvp.experiments.single_plant.CaseResult` (its
+        coverages are NaN: there is no ground truth)."""
+        self.check_captured()
+        config = with_overrides(self.config, overrides or {})
+        transferred = transfer(self.scene, config, progress, nbv=self.nbv())
+        result = plan_case(self.scene, config, progress, transferred)
+        self.commit_plan(lambda folder: write_case_outputs(folder, self.scene, result, config,
+                                                           name=self.folder.name),
+                         {"planned_views": [int(v) for v in result.planned_views],
+                          "executed_views": [int(v) for v in result.executed_views],
+                          "path_length_planning_m": result.path_length})
+        return result
+
+
+KINDS["plant"] = PlantSession

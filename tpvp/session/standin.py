@@ -1,0 +1,71 @@
+"""A stand-in for the robot's camera: today's full scan rendered at the poses a session asks for.
+
+For tutorials and tests: it plays the robot of a real session on a simulated pair. The captures are
+what the simulator observes (:mod:`tpvp.scene.simulator`, ``scene.frame = previous`` at native
+scale, the frame a real session plans in), handed over as a real camera would: a cloud in the
+world frame (the observed voxel centres), or a depth image in metres (the pixel model's
+first-surface depth at the camera's intrinsics).
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from tpvp.scene.simulator import build_scene, observation
+from tpvp.sensor.sensor import depth_image
+from tpvp.experiments.greenhouse import build_row_scene
+from tpvp.session.plant import PlantSession
+from tpvp.visibility import safe_visibility
+
+
+class StandInCamera:
+    """Renders captures of ``current`` (today's full scan, the previous model's frame) for a
+    session planning on ``previous`` under ``config``."""
+
+    def __init__(self, previous, current, config, names=("previous model", "today's scan")):
+        self.config = PlantSession.session_config(config)
+        self.scene = build_scene(previous, current, self.config, names)
+
+    def _to_world(self, points) -> np.ndarray:
+        matrix = self.scene.plant_from_scan
+        return (np.asarray(points, dtype=np.float64) - matrix[:3, 3]) @ np.linalg.inv(matrix[:3, :3]).T
+
+    def cloud(self, view: int) -> np.ndarray:
+        """What ``view`` observes of today's plant: voxel centres in the world frame."""
+        return self._to_world(observation(self.scene, view))
+
+    def depth(self, view: int) -> np.ndarray:
+        """The depth image (metres, NaN where nothing is seen) of ``view`` at the sensor's
+        intrinsics, every pixel."""
+        space = self.scene.view_space
+        sensor = replace(self.scene.sensor, model="pixel", pixel_stride=1)
+        depth, _ = depth_image(self.scene.grid, space.positions[view], space.look_ats[view], sensor)
+        depth = depth / self.scene.scan_scale
+        depth[~np.isfinite(depth)] = np.nan
+        return depth
+
+
+class RowStandInCamera:
+    """Renders captures of ``current`` (today's row, the room's frame) at any pose, for a row
+    session planning on ``previous`` under ``config`` (the simulator's row scene; its oracle is
+    cached in ``cache_dir``)."""
+
+    def __init__(self, previous, current, config, names=("previous row", "today's row"), cache_dir=None):
+        self.config = config
+        self.scene = build_row_scene(previous, current, config, names, cache_dir=cache_dir)
+
+    def cloud(self, position, look_at) -> np.ndarray:
+        """The voxel centres the pose observes of today's row (room frame)."""
+        seen = safe_visibility(self.scene.grid, np.reshape(position, (1, 3)), np.reshape(look_at, (1, 3)),
+                               self.scene.sensor)
+        return self.scene.grid.centres[seen[0].indices]
+
+    def depth(self, position, look_at) -> np.ndarray:
+        """The depth image (metres, NaN where nothing is seen) of the pose, every pixel."""
+        sensor = replace(self.scene.sensor, model="pixel", pixel_stride=1)
+        depth, _ = depth_image(self.scene.grid, np.asarray(position, dtype=np.float64),
+                               np.asarray(look_at, dtype=np.float64), sensor)
+        depth[~np.isfinite(depth)] = np.nan
+        return depth
