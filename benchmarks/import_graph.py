@@ -17,8 +17,8 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent / "tpvp"
 BENCHMARKS = Path(__file__).resolve().parent
-TOP = ("cli", "__main__", "experiments", "session")  # may import anything below them
-ABOVE_STAGES = ("config", "learning", "experiments", "session", "cli", "__main__")
+TOP = ("cli", "cli_common", "__main__", "experiments", "session")  # may import anything below them
+ABOVE_STAGES = ("config", "learning", "experiments", "session", "cli", "cli_common", "__main__")
 
 
 def module_name(path: Path) -> str:

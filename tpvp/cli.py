@@ -11,7 +11,8 @@ import sys
 from pathlib import Path
 
 from tpvp import __version__
-from tpvp.config import SCALES, UP_AXES, config_yaml, derived_table, load_config, parse_overrides
+from tpvp.config import config_yaml, derived_table, load_config, parse_overrides
+from tpvp.cli_common import case_options, configuration_options, print_warnings, resolved_config
 from tpvp.errors import TpvpError, install_warning_format, run_command
 from tpvp.experiments import plants as plant_experiments
 from tpvp.experiments import rows as row_experiments
@@ -21,7 +22,6 @@ from tpvp.experiments.outputs import write_case_outputs, write_row_case_outputs
 from tpvp.experiments.render_demo import RenderDemoConfig, run_render_demo
 from tpvp.experiments.rows import QUICK, RowCase, dataset_cases
 from tpvp.experiments.single_plant import build_scene, run_case, transfer
-from tpvp.scene.simulator import NATIVE_RADIUS
 from tpvp.io import atomic_write_text, read_point_cloud
 from tpvp.io.units import plant_size_warning
 from tpvp.io.publish import staged_folder
@@ -29,15 +29,7 @@ from tpvp.jit import compile_kernels, plant_pieces
 from tpvp.scene.boxes import ROOMS
 from tpvp.scene.normalise import check_session_pair
 from tpvp.scene.samples import load_sample
-from tpvp.sensor.camera import D435
-from tpvp.session import Session, read_depth, read_intrinsics, read_pose_file
-from tpvp.viewspace import get_view_space, view_space_choices
-
-# One rule for plants and rows (selection.coverage_target, SelectionConfig.planning_target).
-COVERAGE_TARGET_HELP = ("true coverage of today's plants to aim for, e.g. 0.98: the fewest views that see "
-                        "1 - r x (1 - target) of the predicted planning surface (exact partial set cover; r per "
-                        "view space, selection.planning_miss_ratio: 0.5 hemisphere, 0.25 sphere and rooms); "
-                        "1.0 = the paper's full set cover (default: the configuration's, 1.0)")
+from tpvp.session.cli import add_session_parser
 
 STAGES = ["compile", "scene", "warm-up NBV", "registration", "inflation", "visibility", "view selection",
           "path", "outputs"]
@@ -68,31 +60,6 @@ def _print_rows(rows, folder, files: str) -> None:
     for key, value in rows:
         print(f"  {key:<{width}}  {value}")
     print(f"wrote {folder}/ ({files})")
-
-
-def _print_warnings(warnings) -> None:
-    for warning in warnings:
-        print(f"tpvp: warning: {warning}", file=sys.stderr)
-
-
-def _config(args):
-    """The resolved configuration: --config, then the dedicated options, then --set overrides."""
-    overrides = {}
-    initial = getattr(args, "initial_view", None)
-    if initial is not None and initial.lstrip("-").isdigit():
-        initial = int(initial)
-    for key, value in (("view_space", getattr(args, "view_space", None)), ("initial_view", initial),
-                       ("scene.scale", getattr(args, "scale", None)), ("scene.radius", getattr(args, "radius", None)),
-                       ("scene.up_axis", getattr(args, "up_axis", None)),
-                       ("selection.coverage_target", getattr(args, "coverage_target", None))):
-        if value is not None:
-            overrides[key] = value
-    overrides.update(parse_overrides(args.set))
-    config = load_config(args.config, overrides)
-
-    if config.setting == "plant":  # a row has no initial view: its passive sweep starts it
-        get_view_space(config.view_space).view_index(config.initial_view)  # refuse before any work
-    return config
 
 
 def _print_frontier(frontier) -> None:
@@ -140,12 +107,12 @@ def _run_pair(previous, current, output, config, name="case", inputs=(), names=N
             print(f"note: the {which} scan's {reduction[f'{which}_points']:,} points were reduced to "
                   f"{reduction[f'{which}_points_used']:,} voxel centroids at "
                   f"{1e3 * reduction['resolution_m']:g} mm (planning frame) before planning")
-    _print_warnings(result.warnings)
+    print_warnings(result.warnings)
     return 0
 
 
 def _demo(args) -> int:
-    config = _config(args)
+    config = resolved_config(args)
     print("bundled real tomato (Pheno4D): previous session 2020-03-05, current 2020-03-06, "
           f"{config.view_space} view space, configuration {config.name!r}")
     return _run_pair(load_sample("tomato_0305"), load_sample("tomato_0306"), args.output, config,
@@ -153,14 +120,14 @@ def _demo(args) -> int:
 
 
 def _plan(args) -> int:
-    config = _config(args)
+    config = resolved_config(args)
     previous, previous_units = read_point_cloud(args.previous, units=args.units, return_units=True,
                                                 drop_invalid=args.drop_invalid)
     current, current_units = read_point_cloud(args.current, units=args.units, return_units=True,
                                               drop_invalid=args.drop_invalid)
     print(f"{args.previous.name}: units: {previous_units}; {args.current.name}: units: {current_units}")
     names = (str(args.previous), str(args.current))
-    _print_warnings(warning for warning in (plant_size_warning(previous, previous_units, names[0]),
+    print_warnings(warning for warning in (plant_size_warning(previous, previous_units, names[0]),
                                             plant_size_warning(current, current_units, names[1])) if warning)
     check_session_pair(previous, current, names, units=(previous_units, current_units))  # before any work
     return _run_pair(previous, current, args.output, config, name=args.current.name,
@@ -189,7 +156,7 @@ def _render(args) -> int:
 
 
 def _show_config(args) -> int:
-    config = _config(args)
+    config = resolved_config(args)
     print(config_yaml(config, f"resolved configuration {config.name!r} (setting: {config.setting})"), end="")
     if args.derived:
         print("# derived parameters (unless set explicitly):")
@@ -199,7 +166,7 @@ def _show_config(args) -> int:
 
 
 def _experiments_plants(args) -> int:
-    config = _config(args)
+    config = resolved_config(args)
     cases = plant_experiments.default_cases(args.quick, args.dataset, args.plants, args.pairs, args.paper_subset,
                                             tuple(args.view_spaces), tuple(args.rotations), tuple(args.initial_views))
     methods = args.methods or list(plant_experiments.ALL_METHODS)
@@ -276,7 +243,7 @@ def _greenhouse(args) -> int:
             ("time: registration / planning", f"{result.timings['registration']:.2f} s / {result.timings['planning']:.2f} s")]
     _print_rows(rows, stage.destination, "results.json/.csv, plan.csv, plan.json, config.yaml, provenance.json, "
                                          "plan.png, recording.rrd")
-    _print_warnings(result.warnings)
+    print_warnings(result.warnings)
     return 0
 
 
@@ -296,21 +263,8 @@ def _experiments_rows(args) -> int:
     return 0
 
 
-def _configuration_options(p, output, named: str = "paper"):
-    """--output, --config, --set and --coverage-target: the same for plants and rows."""
-    if output is not None:
-        p.add_argument("--output", default=output, help="output folder (default: %(default)s)")
-    p.add_argument("--config", default=named, metavar="NAME|FILE",
-                   help=f"named configuration ({named}) or a YAML file, e.g. a run's config.yaml (default: %(default)s)")
-    listed = "tpvp config --derived" if named == "paper" else f"tpvp config --config {named} --derived"
-    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                   help=f"override one configuration key, e.g. --set registration.embedded_deformation.iterations=100 "
-                        f"(repeatable; `{listed}` lists the keys)")
-    p.add_argument("--coverage-target", default=None, type=float, metavar="FRACTION", help=COVERAGE_TARGET_HELP)
-
-
 def _row_options(p, output):
-    _configuration_options(p, output, "paper-row")
+    configuration_options(p, output, "paper-row")
     p.add_argument("--dataset", type=Path, default=None,
                    help="a folder written by `python -m data_tools greenhouse clean` (Processed_3D_Model/"
                         "<room>_<date>.pcd; default: generated rows, offline)")
@@ -321,150 +275,13 @@ def _row_options(p, output):
                    help="coarse ground truth (2 cm), fewer covering voxels, budgets and draws, for a fast look")
 
 
-def _view_space_arg(value: str) -> str:
-    try:
-        get_view_space(value)  # one clear error line for an unknown name or a bad file
-    except TpvpError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
-    return value
-
-
-def _session_parser(sub, common) -> None:
-    session = sub.add_parser("session", help="plan a real session: the previous model and the robot's first "
-                                             "captures, no ground truth (start, add, plan, export)")
-    steps = session.add_subparsers(dest="step", required=True)
-    start = steps.add_parser("start", help="fix the world frame and the candidate views from the previous model; "
-                                           "print the first pose to capture")
-    start.add_argument("--previous", required=True, type=Path, help="the previous session's model (ply/pcd/xyz/...)")
-    start.add_argument("--units", default="auto", choices=["auto", "m", "mm"],
-                       help="units of the previous model and of every capture (default: %(default)s)")
-    common(start, None, frontier=False)
-    start.add_argument("--output", required=True, type=Path, help="the new session folder")
-    start.set_defaults(func=_session_start)
-    add = steps.add_parser("add", help="fuse a capture (a cloud in the world frame, or a depth image) and print "
-                                       "the next pose")
-    add.add_argument("folder", type=Path, help="the session folder")
-    what = add.add_mutually_exclusive_group(required=True)
-    what.add_argument("--cloud", type=Path, help="a captured cloud in the world frame (the previous model's)")
-    what.add_argument("--depth", type=Path, help="a depth image: .npy (metres) or 16-bit .png (millimetres)")
-    add.add_argument("--units", default=None, choices=["auto", "m", "mm"],
-                     help="units of the cloud (default: those the previous model was read in)")
-    add.add_argument("--intrinsics", type=Path, default=None,
-                     help="YAML/JSON with fx, fy, cx, cy, width, height (pixels), optional depth_scale (m per unit); "
-                          "default: the simulated D435 1280 x 720")
-    add.add_argument("--pose", default=None, metavar="VIEW|FILE",
-                     help="where it was captured: a candidate view (index or name), or a pose file (JSON position + "
-                          "look_at, or a plan.csv row; snapped to the nearest candidate) (default: the pose the "
-                          "session asked for)")
-    add.set_defaults(func=_session_add)
-    plan = steps.add_parser("plan", help="plan today's views on what was captured (writes FOLDER/plan/)")
-    plan.add_argument("folder", type=Path, help="the session folder")
-    plan.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                      help="override one configuration key for this plan")
-    plan.add_argument("--coverage-target", default=None, type=float, metavar="FRACTION", help=COVERAGE_TARGET_HELP)
-    plan.set_defaults(func=_session_plan)
-    export = steps.add_parser("export", help="write today's fused model (the next session's --previous)")
-    export.add_argument("folder", type=Path, help="the session folder")
-    export.add_argument("--model", required=True, type=Path, help="the model file to write (.ply/.pcd/.xyz)")
-    export.set_defaults(func=_session_export)
-
-
-def _session_start(args) -> int:
-    if args.scale == "normalised":
-        raise TpvpError("--scale normalised: a real session plans at the plant's true size (the candidate views "
-                        "are metres around it); leave --scale out")
-    if args.view_space in ROOMS and args.config == "paper":
-        args.config = "paper-row"  # a room's view space is a greenhouse row's
-    config = _config(args)
-    previous, units = read_point_cloud(args.previous, units=args.units, return_units=True)
-    session = Session.start(args.output, previous, config, str(args.previous), units=units.used)
-    positions, _ = session.views()
-    where = (f"{config.view_space}, the room's frame" if session.kind == "row" else
-             f"{config.view_space}, {session.config.scene.radius or NATIVE_RADIUS:g} m around the plant")
-    print(f"{args.previous.name}: units: {units}; session {args.output}: {len(positions)} views to capture first or "
-          f"plan from ({where}); world frame = the previous model's")
-    print(session.request().describe())
-    return 0
-
-
-def _session_add(args) -> int:
-    session = Session.open(args.folder)
-    pose = read_pose_file(args.pose) if args.pose is not None and Path(args.pose).is_file() else None
-    view, distance = session.resolve_view(None if pose is not None else args.pose, pose)
-    if pose is not None and distance > 1e-3:
-        _print_warnings([f"{args.pose}: the pose is {distance:.3g} m from candidate view {view}, the nearest; "
-                         f"the capture is taken as view {view}"])
-    if args.cloud is not None:
-        points = read_point_cloud(args.cloud, units=args.units or session.state["units"])
-        record = session.add(points, view, str(args.cloud))
-    else:
-        intrinsics, depth_scale = read_intrinsics(args.intrinsics) if args.intrinsics else (D435, None)
-        record = session.add_depth(read_depth(args.depth, depth_scale), intrinsics, view, str(args.depth))
-    print(f"capture {len(session.captures)}: view {record['view']}, {record['points']:,} points "
-          f"({record['points_kept']:,} near the plant), {record['voxels']:,} voxels")
-    print(session.request().describe())
-    return 0
-
-
-def _session_plan(args) -> int:
-    session = Session.open(args.folder)
-    overrides = parse_overrides(args.set)
-    if args.coverage_target is not None:
-        overrides["selection.coverage_target"] = args.coverage_target
-    result = session.plan(overrides)
-    planned = session.state["plan"]["planned_views"]
-    print(f"  views (captures included)         {result.n_views} ({result.n_views - len(planned)} captured, "
-          f"{len(planned)} planned: {_views_listed(planned)})")
-    print(f"  path length                       {result.path_length / session.scene.scan_scale:.3f} m (world frame)")
-    timings = result.timings
-    print("  time: " + ", ".join(f"{k} {timings[k]:.2f} s" for k in ("registration", "inflation", "visibility",
-                                                                      "selection", "path")))
-    print(f"wrote {args.folder / 'plan'}/ (plan.csv and plan.json in the world frame, results, plan.png, "
-          f"recording.rrd); {session.request().describe()}")
-    _print_warnings(result.warnings)
-    return 0
-
-
-def _views_listed(views, shown: int = 12) -> str:
-    return ", ".join(map(str, views[:shown])) + (f", ... ({len(views)} in all)" if len(views) > shown else "")
-
-
-def _session_export(args) -> int:
-    path = Session.open(args.folder).export(args.model)
-    print(f"wrote {path} (today's fused model, world frame)")
-    return 0
-
-
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="tpvp", description=__doc__.splitlines()[0])
     parser.add_argument("--version", action="version", version=f"tpvp {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
 
-    def common(p, output, case_options=True, frontier=True):
-        _configuration_options(p, output)
-        if not case_options:
-            return
-        if frontier:
-            p.add_argument("--frontier", action="store_true",
-                           help="also the coverage-effort frontier of this case: the plan for targets 0.90 ... 1.0 "
-                                "beside the exact optimum with perfect knowledge (frontier.csv, frontier.png; "
-                                "about 10-60 s more)")
-        p.add_argument("--view-space", default=None, type=_view_space_arg, metavar="SPACE",
-                       help=f"candidate views: {view_space_choices()} (default: the configuration's, hemisphere)")
-        p.add_argument("--initial-view", default=None, metavar="INDEX|NAME",
-                       help="initial view: an index or near_horizontal (17), oblique (8), near_top (21) "
-                            "(default: the configuration's, 17)")
-        p.add_argument("--scale", default=None, choices=SCALES,
-                       help="normalised: the paper's protocol, plant scaled to a 0.24 m largest side; native: plan "
-                            "at the plant's true size with --radius (default: normalised)")
-        p.add_argument("--radius", default=None, type=float, metavar="M",
-                       help="view-sphere radius in metres (native: around the real plant, default 0.4; "
-                            "normalised: default the view space's 0.4)")
-        p.add_argument("--up-axis", default=None, choices=UP_AXES,
-                       help="the scan axis that points up; the plant is turned so that it becomes +Z (default: +z)")
-
     demo = sub.add_parser("demo", help="plan and execute on the bundled real tomato pair (no arguments needed)")
-    common(demo, "outputs/demo")
+    case_options(demo, "outputs/demo")
     demo.set_defaults(func=_demo)
     plan = sub.add_parser("plan", help="plan the current session of your own plant from two scans")
     plan.add_argument("--previous", required=True, type=Path,
@@ -476,9 +293,9 @@ def build_parser() -> argparse.ArgumentParser:
                            "says which it chose (default: %(default)s)")
     plan.add_argument("--drop-invalid", action="store_true",
                       help="drop points with NaN or infinite coordinates instead of refusing the scan")
-    common(plan, "outputs/plan")
+    case_options(plan, "outputs/plan")
     plan.set_defaults(func=_plan)
-    _session_parser(sub, common)
+    add_session_parser(sub)
     render = sub.add_parser("render", help="render the bundled real tomato from every view: coverage per view "
                                            "and depth images of a few views")
     render.add_argument("--output", default="outputs/render", help="output folder (default: %(default)s)")
@@ -490,7 +307,7 @@ def build_parser() -> argparse.ArgumentParser:
     experiments = sub.add_parser("experiments", help="the paper's experiments (tables, figures)")
     which = experiments.add_subparsers(dest="experiment", required=True)
     plant = which.add_parser("plants", help="individual plants: Tables I-IV, every baseline, the exact optimum")
-    common(plant, "outputs/experiments/plants", case_options=False)
+    case_options(plant, "outputs/experiments/plants", case_options=False)
     plant.add_argument("--dataset", type=Path, default=None,
                        help="a folder written by `python -m data_tools pheno4d prepare` (default: generated "
                             "tomato and maize pairs plus the bundled real pair, offline)")
@@ -537,7 +354,7 @@ def build_parser() -> argparse.ArgumentParser:
     green.set_defaults(func=_greenhouse)
     show = sub.add_parser("config", help="print the resolved configuration as YAML (save it, edit it, pass it "
                                          "back with --config)")
-    common(show, None)
+    case_options(show, None)
     show.add_argument("--derived", action="store_true", help="also list the derived parameters and their rules")
     show.set_defaults(func=_show_config)
     return parser

@@ -23,7 +23,6 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from tpvp.config import PlantConfig, with_overrides
-from tpvp.experiments.outputs import write_case_outputs
 from tpvp.experiments.single_plant import plan_case, transfer
 from tpvp.nbv.warm_up import start_nbv
 from tpvp.scene import voxels
@@ -124,6 +123,7 @@ class PlantSession(Session):
         the scan frame) and returns the :class:`~tpvp.experiments.single_plant.CaseResult` (its
         coverages are NaN: there is no ground truth)."""
         self.check_captured()
+        from tpvp.experiments.outputs import write_case_outputs  # matplotlib, pandas: only a plan writes figures
         config = with_overrides(self.config, overrides or {})
         transferred = transfer(self.scene, config, progress, nbv=self.nbv())
         result = plan_case(self.scene, config, progress, transferred)

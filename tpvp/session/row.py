@@ -17,7 +17,6 @@ import numpy as np
 from tpvp.config import RowConfig, with_overrides
 from tpvp.errors import ConfigError
 from tpvp.experiments.greenhouse import RowScene, check_row, plan_row_case, row_transfer
-from tpvp.experiments.outputs import write_row_case_outputs
 from tpvp.scene import voxels
 from tpvp.scene.boxes import room_config
 from tpvp.session.folder import KINDS, Request, Session
@@ -93,6 +92,7 @@ class RowSession(Session):
         """Plan on the passive captures: writes ``plan/`` as ``tpvp greenhouse`` writes its folder
         and returns the :class:`~tpvp.experiments.greenhouse.RowCaseResult` (coverages NaN)."""
         self.check_captured()
+        from tpvp.experiments.outputs import write_row_case_outputs  # matplotlib, pandas: only a plan writes figures
         config: RowConfig = with_overrides(self.config, overrides or {})
         scene = self.row_scene()
         result = plan_row_case(scene, config, progress, row_transfer(scene, config, progress))
