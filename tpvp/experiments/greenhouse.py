@@ -19,7 +19,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from tpvp.config import RowConfig
-from tpvp.errors import GraphTooLargeError, PointCloudError, checked_cloud
+from tpvp.errors import PointCloudError, checked_cloud
 from tpvp.inflation import inflate_voxels
 from tpvp.path.tsp import TspConfig, band_path
 from tpvp.registration.methods import register
@@ -138,10 +138,7 @@ def row_transfer(scene: RowScene, config: RowConfig = RowConfig(), progress=None
     coarse = scene.coarse
     t = time.perf_counter()
     say("registration")
-    try:
-        alignment = register(scene.previous, coarse, config.registration)
-    except GraphTooLargeError as exc:  # name the session: the registration knows arrays only
-        raise GraphTooLargeError(f"{scene.names[0]}: {exc}") from None
+    alignment = register(scene.previous, coarse, config.registration, name=scene.names[0])
     registration = time.perf_counter() - t
     t = time.perf_counter()
     say("inflation")

@@ -15,7 +15,6 @@ import numpy as np
 from scipy import sparse
 
 from tpvp.config import PlantConfig
-from tpvp.errors import GraphTooLargeError
 from tpvp.inflation import inflate
 from tpvp.nbv.warm_up import warm_up
 from tpvp.path.local import predicted_size
@@ -125,10 +124,7 @@ def transfer(scene: Scene, config: PlantConfig = PlantConfig(), progress=None, n
 
     t = time.perf_counter()
     say("registration")
-    try:
-        alignment = register(scene.previous, coarse, config.registration)
-    except GraphTooLargeError as exc:  # name the file: the registration knows arrays only
-        raise GraphTooLargeError(f"{scene.names[0]}: {exc}") from None
+    alignment = register(scene.previous, coarse, config.registration, name=scene.names[0])
     timings["registration"] = time.perf_counter() - t
     return Transfer(nbv, list(nbv.executed), coarse, alignment, timings,
                     _registration_warnings(scene, alignment, config))

@@ -12,6 +12,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from tpvp.errors import GraphTooLargeError
+
 from tpvp.registration.embedded_deformation import register_embedded_deformation
 from tpvp.registration.warp_field import register_warp_field
 from tpvp.registry import Registry
@@ -67,6 +69,12 @@ def no_prior(previous, coarse, config) -> Alignment:
     return Alignment(coarse, 0.0, 0.0, 0.0)
 
 
-def register(previous, coarse, config) -> Alignment:
-    """Run the registration method named by ``config.method``."""
-    return REGISTRATION_METHODS.get(config.method)(previous, coarse, config)
+def register(previous, coarse, config, name: str | None = None) -> Alignment:
+    """Run the registration method named by ``config.method``; ``name`` (the previous session's
+    file) starts the message of a graph over its node limit (the method knows arrays only)."""
+    try:
+        return REGISTRATION_METHODS.get(config.method)(previous, coarse, config)
+    except GraphTooLargeError as exc:
+        if name is None:
+            raise
+        raise GraphTooLargeError(f"{name}: {exc}") from None
