@@ -26,15 +26,21 @@ Usage:
 from __future__ import annotations
 
 import argparse
+import shlex
+import sys
 import time
 from concurrent.futures import ProcessPoolExecutor
+from datetime import datetime, timezone
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
 from tpvp.config import make_config, with_overrides
+from tpvp.io import atomic_write_text
 from tpvp.experiments import plants
 
+RESULTS = Path(__file__).resolve().parent / "results"
 CALIBRATION_TARGETS = (0.95, 0.97, 0.98, 0.985, 0.99, 0.995, 1.0)
 EVALUATION_TARGETS = (0.95, 0.98, 0.99, 1.0)
 
@@ -124,6 +130,9 @@ def main() -> None:
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--nbv", default=None, help="warm-up NBV method (default: the paper configuration's)")
     parser.add_argument("--output", default=None, help="CSV of every (case, target) row")
+    parser.add_argument("--results", default=str(RESULTS), metavar="DIR",
+                        help="folder of the result tables, coverage_target_<mode>.md with the command that made "
+                             "them (default: %(default)s)")
     args = parser.parse_args()
     calibrate = args.mode == "calibrate"
     seeds = tuple(args.seeds or ((10, 11, 12) if calibrate else plants.GENERATED_SEEDS))
@@ -140,18 +149,35 @@ def main() -> None:
           f"warm-up NBV {args.nbv or make_config('plant').nbv.method}, "
           f"{time.perf_counter() - started:.0f} s on {args.workers} workers")
     pd.set_option("display.width", 200)
+    tables = []
     if calibrate:
         summary, rules = calibration_summary(raw)
-        for column in ("coverage_mean", "coverage_min"):
-            summary[column] *= 100
-        print(summary.round(3).to_string(index=False))
-        print("\nsmallest planning target with mean >= asked and no case below asked - 1 point:")
-        print(rules.round(4).to_string(index=False))
+        tables = [("summary (coverage in %)", summary),
+                  ("smallest planning target with mean >= asked and no case below asked - 1 point", rules)]
     else:
-        summary = evaluation_summary(raw)
+        tables = [("evaluation (coverage in %)", evaluation_summary(raw))]
+    for _, table in tables:
         for column in ("coverage_mean", "coverage_min"):
-            summary[column] *= 100
-        print(summary.round(3).to_string(index=False))
+            if column in table:
+                table[column] *= 100
+    for title, table in tables:
+        print(f"\n{title}:\n{table.round(4).to_string(index=False)}")
+    _write_results(Path(args.results) / f"coverage_target_{args.mode}.md", tables,
+                   f"{len(cases)} cases x {len(targets)} targets, seeds {list(seeds)}, warm-up NBV "
+                   f"{args.nbv or make_config('plant').nbv.method}")
+
+
+def _write_results(path: Path, tables, what: str) -> None:
+    """The tables as Markdown with the command that made them (through the library's atomic writer)."""
+    command = "python " + " ".join(shlex.quote(a) for a in [Path(sys.argv[0]).as_posix(), *sys.argv[1:]])
+    text = [f"# {path.stem}", "", f"Made by `{command}` on {datetime.now(timezone.utc):%Y-%m-%d} ({what}).", ""]
+    for title, table in tables:
+        rows = [[f"{v:.4g}" if isinstance(v, (float, np.floating)) else str(v) for v in row]
+                for row in table.itertuples(index=False)]
+        text += [f"## {title}", "", "| " + " | ".join(map(str, table.columns)) + " |",
+                 "|" + "---|" * len(table.columns), *("| " + " | ".join(row) + " |" for row in rows), ""]
+    atomic_write_text(path, "\n".join(text))
+    print(f"wrote {path}")
 
 
 if __name__ == "__main__":
