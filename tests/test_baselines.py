@@ -8,7 +8,8 @@ import pytest
 from scipy import sparse
 
 from tpvp.errors import ConfigError
-from tpvp.experiments.baselines import NBV_COLUMNS, OPTIMUM_COLUMNS, nbv_curve, optimum
+from tpvp.config import with_overrides
+from tpvp.experiments.baselines import NBV_COLUMNS, OPTIMUM_COLUMNS, break_tie, nbv_curve, optimum
 from tpvp.path.local import local_path_lengths, obstacle_radius
 from tpvp.setcover import SetCoverConfig
 from tpvp.setcover.maxcover import MaxCoverResult, max_coverage
@@ -141,6 +142,94 @@ def test_nbv_curve(small_case):
     for bad in (0, 2.5, True):
         with pytest.raises(ConfigError, match="max_views"):
             nbv_curve(scene, config, max_views=bad)
+
+
+def test_break_tie_brute_force():
+    """The tied candidate of shortest sphere-avoiding move, then the lowest index, by enumeration."""
+    rng = np.random.default_rng(5)
+    centre = np.zeros(3)
+    for trial in range(40):
+        n = int(rng.integers(3, 12))
+        positions = rng.normal(size=(n, 3))
+        positions *= 0.4 / np.linalg.norm(positions, axis=1, keepdims=True)
+        if trial % 4 == 0:
+            positions[-1] = positions[-2]  # two tied candidates at the same move length: the lower index
+        scores = rng.integers(0, 3, size=n).astype(float)
+        executed = sorted(rng.choice(n, size=int(rng.integers(1, n)), replace=False).tolist())
+        current, radius = executed[-1], float(rng.uniform(0.0, 0.3))
+
+        def moves(ids):
+            return local_path_lengths(positions[[current, *ids]], centre, radius)[0, 1:]
+
+        free = [v for v in range(n) if v not in executed]
+        best = max(scores[free])
+        tied = [v for v in free if scores[v] == best]
+        lengths = {v: local_path_lengths(positions[[current, v]], centre, radius)[0, 1] for v in tied}
+        expected = min(tied, key=lambda v: (lengths[v], v))
+        assert break_tie(scores, tied[0], executed, moves) == (expected, len(tied))
+        assert break_tie(scores, tied[0], executed, moves, "lowest-index") == (tied[0], len(tied))
+    # a pick that is not among the largest scores, or scores that do not cover the views: kept
+    assert break_tie([0.0, 1.0, 1.0], 0, [], lambda ids: np.zeros(len(ids))) == (0, 1)
+    assert break_tie([], 3, [0, 1], lambda ids: np.zeros(len(ids))) == (3, 1)
+
+
+def test_nbv_curve_breaks_ties_by_the_shortest_move(small_case, monkeypatch):
+    """An NBV method whose gains are all 0: every pick is a tie, decided by the shortest move."""
+    from tpvp.experiments import baselines
+    from tpvp.nbv.methods import NbvChoice, ObservedViews
+
+    class Flat(ObservedViews):
+        def next_view(self):
+            return NbvChoice(min(set(range(len(self.context.view_space))) - set(self.executed)),
+                             np.zeros(len(self.context.view_space)))
+
+    monkeypatch.setattr(baselines, "make_nbv", Flat)
+    scene, config = small_case
+    n_views = len(scene.view_space)
+    curve = nbv_curve(scene, config, max_views=n_views)
+    views = curve["view"].tolist()
+    assert curve["tied"].tolist() == [0, *range(n_views - 1, 0, -1)]
+    for k in range(1, n_views):
+        free = [v for v in range(n_views) if v not in views[:k]]
+        radius = curve["radius"].iloc[k]
+        lengths = [local_path_lengths(scene.views[[views[k - 1], v]], np.zeros(3), radius)[0, 1] for v in free]
+        assert views[k] == free[int(np.argmin(lengths))]
+        assert curve["step_length"].iloc[k] == pytest.approx(min(lengths))
+    lowest = nbv_curve(scene, with_overrides(config, {"gmc.tie_break": "lowest-index"}), max_views=n_views)
+    assert lowest["view"].tolist() == [0, *range(1, n_views)]
+
+
+def test_gmc_gain_after_four_views_on_the_bundled_tomato():
+    """Issue 27: on the warm-up's 32-voxel map every gain is 0 after three or four views (the picks
+    were the tie rule's); GMC's map (gmc.map_resolution) keeps telling the candidates apart."""
+    from dataclasses import replace
+
+    from tpvp.config import make_config
+    from tpvp.experiments import plants
+    from tpvp.experiments.baselines import gmc_nbv_config
+    from tpvp.experiments.single_plant import observation
+    from tpvp.nbv.methods import NbvContext, make_nbv
+
+    case = plants.case_list([plants.bundled_instance()], view_spaces=("sphere",), rotations=(0.0,),
+                            initial_views=(17,))[0]
+    config = case.config(make_config("plant"))
+    scene = plants.case_scene(case, config)
+    curve = nbv_curve(scene, config, max_views=4)
+    executed = curve["view"].tolist()
+    assert (curve["tied"].iloc[1:4] == 1).all()  # the gain alone chose views 2..4
+
+    def gains(nbv_config):
+        space = scene.view_space
+        nbv = make_nbv(NbvContext(space, np.zeros(3), scene.sensor, nbv_config, prior=scene.previous))
+        for view in executed:
+            nbv.integrate(view, observation(scene, view))
+        scores = nbv.next_view().scores
+        return np.delete(scores, executed)
+
+    after = gains(gmc_nbv_config(config))
+    assert after.max() > 0 and np.unique(after).size > 2
+    assert gains(config.nbv).max() == 0  # the 32-voxel map: the old straw man
+    assert gmc_nbv_config(replace(config, gmc=replace(config.gmc, map_resolution=None))) == config.nbv
 
 
 def brute_min_views(a, initial, required):

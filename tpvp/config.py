@@ -110,6 +110,36 @@ class NbvConfig:
         _integer(self, "pixel_stride", minimum=1)
 
 
+TIE_BREAKS = ("shortest-move", "lowest-index")
+
+
+@dataclass(frozen=True)
+class GmcConfig:
+    """The GMC baseline (the sequential NBV curve of Table I, :func:`tpvp.experiments.baselines.nbv_curve`;
+    docs/experiments.md#gmc). Its NBV method and pixel stride are ``nbv``'s; these settings are its own.
+
+    map_resolution: voxel (m) of GMC's occupancy map; derived: 1 x gt_resolution (0.002 m). The
+    authors' GMC maps at ``ground_truth_resolution x voxel_resolution_factor`` = 2 x gt_resolution =
+    0.004 m, but in OctoMap's probabilistic map, where a voxel both hit and passed through stays
+    unknown; in this three-state map every candidate's gain is 0 after 4-6 views at 4 mm, and stays
+    positive until 13-17 views at the ground-truth voxel (docs/deviations.md, benchmarks/gmc_gain.py).
+    None: ``nbv.map``'s rule, 32 voxels across the plant (about 9 mm on a tomato; every gain 0 after
+    3-4 views), the warm-up's map.
+    tie_break: among the candidates that share the largest gain, ``shortest-move`` takes the one of
+    shortest sphere-avoiding local path from the current view (the authors' ``view_utility_compare``:
+    equal utility, smaller ``robot_cost``), then the lowest index; ``lowest-index`` takes the lowest index.
+    """
+
+    map_resolution: float | None = 0.002
+    tie_break: str = "shortest-move"
+
+    def __post_init__(self):
+        if self.map_resolution is not None:
+            _positive(self, "map_resolution")
+        if self.tie_break not in TIE_BREAKS:
+            raise ConfigError(f"gmc.tie_break must be one of {', '.join(TIE_BREAKS)}, got {self.tie_break!r}")
+
+
 @dataclass(frozen=True)
 class RegistrationConfig:
     """Alignment of the previous session onto the coarse reconstruction. method: a name of
@@ -197,6 +227,7 @@ class PlantConfig:
     inflation: InflationConfig = field(default_factory=InflationConfig)
     selection: SelectionConfig = field(default_factory=SelectionConfig)
     path: TspConfig = field(default_factory=TspConfig)
+    gmc: GmcConfig = field(default_factory=GmcConfig)
 
     setting = "plant"
 
@@ -373,6 +404,8 @@ DERIVED = {
                                 lambda c: 2.5 * c["gt_resolution"]),
         "selection.cover_resolution": ("2 x gt_resolution (history_resolution_factor)",
                                        lambda c: 2 * c["gt_resolution"]),
+        "gmc.map_resolution": ("1 x gt_resolution (the authors: 2 x, probabilistic map; docs/deviations.md)",
+                               lambda c: c["gt_resolution"]),
         "sensor.max_range": ("the view space's range (1.0 m plants)", lambda c: _view_space_range(c["view_space"])),
     },
     "row": {

@@ -7,6 +7,16 @@ after the other and the view's ground-truth observation is integrated. The curve
 number of executed views ``n = 1 .. max_views`` (the initial view included), so the paper's budgets
 5/10/15/20 are rows of one run. It stops early only when every view of the view space is executed.
 
+GMC's own settings (``config.gmc``, :class:`tpvp.config.GmcConfig`): its occupancy map has the
+ground-truth voxel, ``gmc.map_resolution`` = 1 x gt_resolution = 2 mm, not the warm-up's 32 voxels
+across (about 9 mm on a tomato, where every candidate's gain is 0 after three or four views and the
+curve measured the tie rule; the authors' 4 mm keeps it positive only in their probabilistic map,
+docs/deviations.md). Candidates that share the largest gain are told apart by ``gmc.tie_break``:
+``shortest-move`` (the authors' rule) takes the shortest sphere-avoiding local path from the
+current view, with the obstacle radius of that move (below), then the lowest index. The ``tied``
+column counts the candidates that shared the largest gain at each pick (1: the gain alone decided;
+0 for the initial view), so the picks a tie decided are the rows with ``tied > 1``.
+
 Path of the NBV baseline: the views are executed in the order chosen (no reordering), each move by
 the sphere-avoiding local path (:mod:`tpvp.path.local`) around the obstacle sphere centred at the
 plant centre (origin). **The obstacle radius is updated at every step**: the move from view n-1 to
@@ -36,6 +46,7 @@ from __future__ import annotations
 
 import math
 import time
+from dataclasses import replace
 
 import numpy as np
 import pandas as pd
@@ -50,7 +61,7 @@ from tpvp.path.tsp import shortest_open_path
 from tpvp.setcover.ilp import solve_set_cover
 from tpvp.setcover.partial import partial_set_cover
 
-NBV_COLUMNS = ("views", "view", "coverage", "path_length", "seconds", "step_length", "radius")
+NBV_COLUMNS = ("views", "view", "coverage", "path_length", "seconds", "step_length", "radius", "tied")
 OPTIMUM_COLUMNS = ("target", "views", "coverage", "path_length", "optimal", "bound", "gap", "seconds",
                    "selected", "order", "selection_optimal", "path_optimal", "status")
 
@@ -87,6 +98,39 @@ def _check_targets(targets) -> tuple:
     return tuple(out)
 
 
+def gmc_nbv_config(config: PlantConfig):
+    """The NBV configuration GMC runs with: ``config.nbv`` with the map voxel ``config.gmc.map_resolution``
+    (None: ``config.nbv`` as it is)."""
+    nbv = config.nbv
+    if config.gmc.map_resolution is None:
+        return nbv
+    return replace(nbv, map=replace(nbv.map, resolution=float(config.gmc.map_resolution)))
+
+
+def break_tie(scores, view: int, executed, moves, rule: str = "shortest-move") -> tuple[int, int]:
+    """``(view, tied)``: the NBV among the candidates (views not in ``executed``) that share the
+    largest of ``scores``, and how many share it. ``view`` is the method's own pick; ``moves(ids)``
+    gives the move lengths from the current view to the views ``ids``. ``shortest-move``: the tied
+    candidate of shortest move, then the lowest index; ``lowest-index``: ``view`` (the methods' own
+    rule). Scores that do not cover the view space, or a pick that is not among the largest, leave
+    ``view`` (``tied`` = 1)."""
+    scores = np.asarray(scores, dtype=np.float64).reshape(-1)
+    done = np.asarray(executed, dtype=np.int64).reshape(-1)
+    if done.size and done.max() >= scores.size:
+        return int(view), 1
+    candidates = np.ones(scores.size, dtype=bool)
+    candidates[done] = False
+    if not candidates.any() or not (0 <= view < scores.size) or not candidates[view]:
+        return int(view), 1
+    tied = np.flatnonzero(candidates & (scores == scores[candidates].max()))
+    if view not in tied:
+        return int(view), 1
+    if len(tied) == 1 or rule == "lowest-index":
+        return int(view), len(tied)
+    lengths = np.asarray(moves(tied), dtype=np.float64)
+    return int(tied[int(np.argmin(lengths))]), len(tied)  # argmin: the first, the lowest index
+
+
 def nbv_curve(scene, config: PlantConfig = PlantConfig(), max_views: int = 20) -> pd.DataFrame:
     """Sequential NBV from ``config.initial_view`` for up to ``max_views`` views (initial included).
 
@@ -95,8 +139,9 @@ def nbv_curve(scene, config: PlantConfig = PlantConfig(), max_views: int = 20) -
     of the union of the executed views), ``path_length`` (local paths accumulated in execution
     order, planning frame m), ``seconds`` (NBV time of the step: choosing the view and integrating
     its observation; the first row only integrates the initial view), ``step_length`` (the move
-    into this view) and ``radius`` (the obstacle radius of that move, from the points observed
-    before it; 0 when nothing was observed yet).
+    into this view), ``radius`` (the obstacle radius of that move, from the points observed
+    before it; 0 when nothing was observed yet) and ``tied`` (candidates that shared the largest
+    gain, :func:`break_tie`; 0 for the initial view).
     """
     config, space, centre, initial = _plant_case(scene, config)
     max_views = _check_max_views(max_views)
@@ -107,29 +152,37 @@ def nbv_curve(scene, config: PlantConfig = PlantConfig(), max_views: int = 20) -
     n_oracle = int(is_oracle.sum())
     covered = np.zeros(truth.shape[1], dtype=bool)
 
-    nbv = make_nbv(NbvContext(space, centre, scene.sensor, config.nbv, prior=scene.previous))
+    nbv = make_nbv(NbvContext(space, centre, scene.sensor, gmc_nbv_config(config), prior=scene.previous))
     observed: list[np.ndarray] = []
+    executed: list[int] = []
     rows = []
     path = 0.0
     previous = None
     for n in range(1, n_steps + 1):
         t = time.perf_counter()
-        view = initial if n == 1 else int(nbv.next_view().view)
-        points = observation(scene, view)
-        nbv.integrate(view, points)
-        seconds = time.perf_counter() - t
         if previous is None:
-            radius, step = 0.0, 0.0
+            view, tied, radius = initial, 0, 0.0
         else:
             known = np.concatenate(observed)
             radius = obstacle_radius(known, centre) if len(known) else 0.0
-            step = float(local_path_lengths(space.positions[[previous, view]], centre, radius)[0, 1])
+            choice = nbv.next_view()
+
+            def moves(ids, start=previous, radius=radius):
+                return local_path_lengths(space.positions[[start, *ids]], centre, radius)[0, 1:]
+
+            view, tied = break_tie(choice.scores, int(choice.view), executed, moves, config.gmc.tie_break)
+        points = observation(scene, view)
+        nbv.integrate(view, points)
+        seconds = time.perf_counter() - t
+        step = 0.0 if previous is None else \
+            float(local_path_lengths(space.positions[[previous, view]], centre, radius)[0, 1])
         path += step
         observed.append(points)
+        executed.append(view)
         covered[truth.indices[truth.indptr[view]:truth.indptr[view + 1]]] = True
         coverage = float((covered & is_oracle).sum() / n_oracle) if n_oracle else float("nan")
         rows.append({"views": n, "view": view, "coverage": coverage, "path_length": path, "seconds": seconds,
-                     "step_length": step, "radius": float(radius)})
+                     "step_length": step, "radius": float(radius), "tied": int(tied)})
         previous = view
     return pd.DataFrame(rows, columns=list(NBV_COLUMNS))
 

@@ -249,11 +249,14 @@ for _name, (_, _help) in ONE_SHOT_METHODS.items():
     PLANT_METHODS.register(_name, _help)(_one_shot(_name))
 
 
-@PLANT_METHODS.register("gmc", "GMC-style sequential NBV from the initial view; the whole 1..20 curve")
+@PLANT_METHODS.register("gmc", "GMC-style sequential NBV from the initial view; the whole 1..20 curve "
+                                "(tie_picks: the picks so far that the tie rule decided)")
 def gmc(scene, config):
     curve = nbv_curve(scene, config, max_views=max(GMC_BUDGETS))
+    tie_picks = np.cumsum(curve["tied"].to_numpy() > 1)  # picks so far that a tie decided (gmc.tie_break)
     return [{"budget": int(row.views), "views": int(row.views), "coverage": row.coverage,
-             "path_length_m": row.path_length, "seconds_planning": float(curve["seconds"][:i + 1].sum())}
+             "path_length_m": row.path_length, "seconds_planning": float(curve["seconds"][:i + 1].sum()),
+             "tie_picks": int(tie_picks[i])}
             for i, row in enumerate(curve.itertuples())]
 
 

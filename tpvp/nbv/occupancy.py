@@ -42,13 +42,20 @@ _MAX_CELLS = 50_000_000
 
 @dataclass(frozen=True)
 class OccupancyMapConfig:
-    """Map geometry (defaults: docs/single_plant.md#occupancy-map)."""
+    """Map geometry (defaults: docs/single_plant.md#occupancy-map). ``resolution``: a fixed voxel
+    size (m) instead of ``2 * predicted_size / voxels_across`` (None, the default; the GMC baseline
+    sets it, :class:`tpvp.config.GmcConfig`)."""
 
     voxels_across: int = 32  # voxel = 2 * predicted_size / voxels_across
     size_factor: float = 17 / 16  # predicted_size = size_factor * max distance centre -> point
     padding: int = 1  # voxels added on every side of the cube centre +- predicted_size
+    resolution: float | None = None  # fixed voxel (m); None: 2 * predicted_size / voxels_across
 
     def __post_init__(self):
+        if self.resolution is not None and not (isinstance(self.resolution, (int, float))
+                                                and not isinstance(self.resolution, bool)
+                                                and math.isfinite(self.resolution) and self.resolution > 0):
+            raise ConfigError(f"resolution must be a voxel size > 0 m or None, got {self.resolution!r}")
         if int(self.voxels_across) < 1:
             raise ConfigError(f"voxels_across must be a positive integer, got {self.voxels_across!r}")
         if not (self.size_factor > 0):
@@ -101,7 +108,8 @@ class OccupancyMap:
         centre = _as_position(centre, "map centre")
         if not (np.isfinite(predicted_size) and predicted_size > 0):
             raise ConfigError(f"predicted_size must be > 0 m, got {predicted_size!r}")
-        res = 2.0 * float(predicted_size) / int(config.voxels_across)
+        res = (2.0 * float(predicted_size) / int(config.voxels_across) if config.resolution is None
+               else float(config.resolution))
         pad = int(config.padding)
         lo = voxels.voxel_keys(centre - predicted_size, res)[0] - pad
         hi = voxels.voxel_keys(centre + predicted_size, res)[0] + pad
