@@ -131,8 +131,8 @@ def main() -> None:
     parser.add_argument("--nbv", default=None, help="warm-up NBV method (default: the paper configuration's)")
     parser.add_argument("--output", default=None, help="CSV of every (case, target) row")
     parser.add_argument("--results", default=str(RESULTS), metavar="DIR",
-                        help="folder of the result tables, coverage_target_<mode>.md with the command that made "
-                             "them (default: %(default)s)")
+                        help="folder of the result tables, coverage_target_<mode>[_<nbv>].md with the command "
+                             "that made them (default: %(default)s)")
     args = parser.parse_args()
     calibrate = args.mode == "calibrate"
     seeds = tuple(args.seeds or ((10, 11, 12) if calibrate else plants.GENERATED_SEEDS))
@@ -162,7 +162,8 @@ def main() -> None:
                 table[column] *= 100
     for title, table in tables:
         print(f"\n{title}:\n{table.round(4).to_string(index=False)}")
-    _write_results(Path(args.results) / f"coverage_target_{args.mode}.md", tables,
+    nbv = f"_{args.nbv}" if args.nbv else ""
+    _write_results(Path(args.results) / f"coverage_target_{args.mode}{nbv}.md", tables,
                    f"{len(cases)} cases x {len(targets)} targets, seeds {list(seeds)}, warm-up NBV "
                    f"{args.nbv or make_config('plant').nbv.method}")
 
