@@ -1,9 +1,12 @@
 """Warp-field ICP (tpvp.registration.warp_field): the greenhouse-row registration."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from scipy import sparse
 from scipy.sparse import linalg as splinalg
+from scipy.spatial import cKDTree
 
 from tpvp.config import RowConfig, make_config
 from tpvp.errors import ConfigError, PointCloudError
@@ -75,6 +78,51 @@ def test_identity_input_stays_put_after_one_iteration(row):
     np.testing.assert_allclose(result.rotations, np.tile(np.eye(3), (result.n_nodes, 1, 1)), atol=1e-15)
 
 
+@pytest.fixture(scope="module")
+def unchanged_row():
+    """A generated room1 row that did not change between sessions: P = its full cloud, Q = what the
+    15 passive views see of it (~half of the row), as the greenhouse experiments build them."""
+    from tpvp.experiments.greenhouse import build_row_scene
+    from tpvp.experiments.rows import quick_config
+
+    config = quick_config({"view_space": "room1"})
+    points = generate_row("room1", 0, 1, point_spacing=0.008).points
+    scene = build_row_scene(points, points, config, cache_dir=False)
+    return scene.previous, scene.coarse, config.registration
+
+
+def test_an_unchanged_row_stays_put(unchanged_row):
+    """Issue 27.5: the row's registration moved what did not move. Correspondences searched from the
+    partial scan Q onto P give the unseen parts of P no data term; Q inside P then stays put."""
+    P, Q, config = unchanged_row
+    seen = cKDTree(Q).query(P)[0] < 1e-9
+    assert 0.2 < seen.mean() < 0.8  # a partial scan
+    alignment = register(P, Q, config)
+    moved = np.linalg.norm(alignment.warped - P, axis=1)
+    assert moved.mean() <= 1e-3
+    assert alignment.chamfer_after <= alignment.chamfer_before
+    # the authors' previous -> coarse search pulls the unseen half onto the seen one
+    authors = register_warp_field(P, Q, replace(config.warp_field, correspondences="previous-to-coarse"))
+    assert np.linalg.norm(authors.warped - P, axis=1).mean() > 5e-3
+    assert authors.chamfer_after > authors.chamfer_before
+
+
+def test_coarse_to_previous_recovers_a_known_deformation(row):
+    """Searched from the target side the field still undoes a smooth warp: seen whole, and seen
+    only in part (the rest follows the regularisation)."""
+    P, box = row
+    P = P[::2]
+    target = bend(P, box)
+    config = WarpFieldConfig(voxel=None, correspondences="coarse-to-previous")
+    whole = register_warp_field(P, target, config)
+    assert np.linalg.norm(whole.warped - target, axis=1).mean() < 0.003  # measured 2.0 mm
+    front = box.to_local(P)[:, 1] < 0.0  # the half facing one side of the row
+    part = register_warp_field(P, target[front], config)
+    error = np.linalg.norm(part.warped - target, axis=1)
+    assert np.linalg.norm(target - P, axis=1)[~front].mean() > 0.025
+    assert error[front].mean() < 0.0035 and error[~front].mean() < 0.006  # measured 2.4 and 4.2 mm
+
+
 def test_matches_cilantro_on_a_small_patch():
     """The reference itself: cilantro @ cd473eb (SimpleCombinedMetricSparseRigidWarpFieldICP3f, float32,
     the settings of TPVP's cilantro_nicp Registration.cpp) run on this patch with these target normals
@@ -119,7 +167,7 @@ def test_voxel_reduction_and_the_registry(row):
     P, box = row
     P = P[::3]
     config = RowConfig().registration
-    assert config.method == "warp-field" and config.warp_field == WarpFieldConfig()
+    assert config.method == "warp-field" and config.warp_field == WarpFieldConfig(correspondences="coarse-to-previous")
     assert "warp-field" in REGISTRATION_METHODS
     dense = np.concatenate([P, P + 0.003])  # two points in most 1 cm voxels
     alignment = register(dense, bend(dense, box), config)
@@ -202,6 +250,24 @@ def test_normal_equations_match_a_finite_difference_jacobian():
     np.testing.assert_allclose(grad, J.T @ r, atol=1e-6 * np.abs(J.T @ r).max())
     assert cost == pytest.approx(r @ r, rel=1e-12)
 
+    # the same pairs as a correspondence list (the coarse -> previous search): the same system;
+    # a pair listed twice counts twice
+    source = np.flatnonzero(mask)
+    listed = _normal_equations(graph, theta, s.T.copy(), d[source].T.copy(), n[source].T.copy(),
+                               np.ones(len(source)), config, source)
+    np.testing.assert_allclose(listed[0].toarray(), H.toarray(), rtol=1e-12, atol=1e-12 * scale)
+    np.testing.assert_allclose(listed[1], grad, rtol=1e-12, atol=1e-12 * np.abs(grad).max())
+    assert listed[2] == pytest.approx(cost, rel=1e-12)
+    def listed_system(ids):
+        return _normal_equations(graph, theta, s.T.copy(), d[ids].T.copy(), n[ids].T.copy(), np.ones(len(ids)),
+                                 config, ids)
+
+    doubled, once, none = (listed_system(ids) for ids in (np.append(source, source[0]), source[:1], source[:0]))
+    for k in range(3):  # full + (one pair + regularisation) - regularisation
+        expected = listed[k] + once[k] - none[k]
+        np.testing.assert_allclose(doubled[k].toarray() if k == 0 else doubled[k],
+                                   expected.toarray() if k == 0 else expected, rtol=1e-10, atol=1e-12 * scale)
+
     # every linear solver solves the system; the CG ones stop at Eigen's relative residual
     exact = np.linalg.solve(H.toarray(), -grad)
     for solver in ("cg", "lu-cg"):
@@ -280,6 +346,7 @@ def test_bad_input_is_one_clear_line(row, previous, coarse, message):
     ({"anchors": 0}, "anchors must be an integer >= 1"),
     ({"icp_iterations": 2.5}, "icp_iterations must be an integer"),
     ({"solver": "lu"}, "solver must be one of lu-cg, cg, direct"),
+    ({"correspondences": "nearest"}, "correspondences must be one of previous-to-coarse, coarse-to-previous, both"),
     ({"workers": 0}, "workers must be an integer >= 1 or -1"),
     ({"stiffness": -1.0}, "stiffness must be a number >= 0"),
 ])

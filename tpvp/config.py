@@ -356,7 +356,9 @@ class RowConfig:
     view_space: the room (``room1``, ``room4``; its boxes, candidate positions and passive sweep
     are :func:`tpvp.scene.boxes.room_config`). oracle_grid: spacing of the view-box grid of the
     FOV-free oracle (10 x gt_resolution). The registration section holds the row's control-node
-    spacing (0.15 m, not derived). protocol: what the experiments sweep (Tables V-VI);
+    spacing (0.15 m, not derived) and searches the warp field's correspondences from the partial
+    coarse scan onto the previous session (``coarse-to-previous``, not the authors'
+    ``previous-to-coarse``: docs/greenhouse.md#registration). protocol: what the experiments sweep (Tables V-VI);
     pose_noise: the Table VII study; blockwise: the Block-wise NBV baseline.
     """
 
@@ -368,8 +370,9 @@ class RowConfig:
     sensor: SensorConfig = field(default_factory=lambda: SensorConfig(max_range=ROW_RANGE))
     nbv: NbvConfig = field(default_factory=lambda: NbvConfig(pixel_stride=20))
     registration: RegistrationConfig = field(
-        default_factory=lambda: RegistrationConfig(method="warp-field",
-                                                   embedded_deformation=EDConfig(node_coverage=0.15)))
+        default_factory=lambda: RegistrationConfig(
+            method="warp-field", embedded_deformation=EDConfig(node_coverage=0.15),
+            warp_field=WarpFieldConfig(correspondences="coarse-to-previous")))
     inflation: InflationConfig = field(default_factory=lambda: InflationConfig(0.01, 0.01, 0.01))
     selection: SelectionConfig = field(default_factory=lambda: SelectionConfig(cover_resolution=0.04))
     targets: RowTargetsConfig = field(default_factory=RowTargetsConfig)

@@ -41,8 +41,8 @@ PLANNING_STAGES = ("registration", "inflation", "targets", "visibility", "select
 @dataclass(frozen=True, eq=False)
 class RowScene:
     """A pair of sessions of one row in the room's (world) frame, the current ground truth, its
-    oracle and what the passive sweep saw of it: the voxel ids ``passive_seen``, their centres (the
-    coarse reconstruction Q, ``coarse``) and, per point of Q, the position of the first passive
+    oracle and what the passive sweep saw of it: the voxel ids ``passive_seen``, the centroids of
+    the ground truth's points in them (the coarse reconstruction Q, ``coarse``) and, per point of Q, the position of the first passive
     view that saw it (``passive_cameras``)."""
 
     room: object  # tpvp.scene.boxes.RoomConfig
@@ -116,9 +116,24 @@ def build_row_scene(previous_points, current_points, config: RowConfig = RowConf
                               f"(empty passive scan): is the row in {room_cfg.room}'s frame?")
     if len(oracle) == 0:
         raise PointCloudError(f"{names[1]}: no voxel of the row is visible from {room_cfg.room}'s view box")
-    return RowScene(room_cfg, previous, voxels.voxel_centroids(current, resolution), grid, oracle, passive, seen,
-                    grid.centres[seen], room_cfg.initial_positions[first_view[seen]], config.sensor, tuple(names),
-                    timings, from_cache, date)
+    current = voxels.voxel_centroids(current, resolution)
+    return RowScene(room_cfg, previous, current, grid, oracle, passive, seen, observed_points(grid, current)[seen],
+                    room_cfg.initial_positions[first_view[seen]], config.sensor, tuple(names), timings, from_cache,
+                    date)
+
+
+def observed_points(grid, centroids) -> np.ndarray:
+    """Per voxel of ``grid`` the centroid of the ground-truth points in it (``centroids``: the
+    ground truth's :func:`tpvp.scene.voxels.voxel_centroids` at the grid's resolution, the grid's
+    key order), the voxel centre where rounding puts a centroid in another voxel. What a view sees
+    of a voxel is its points: the reference's coarse cloud is the observed points reduced to 1 cm
+    voxel centroids, as the previous session is, so an unchanged row gives Q inside P
+    (docs/greenhouse.md#registration); voxel centres would sit up to half a voxel diagonal off P."""
+    centres = grid.centres
+    if len(centroids) != len(centres):
+        return centres
+    same = np.all(voxels.voxel_keys(centroids, grid.resolution) == grid.keys, axis=1)
+    return np.where(same[:, None], centroids, centres)
 
 
 @dataclass(frozen=True, eq=False)

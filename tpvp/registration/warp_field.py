@@ -15,7 +15,12 @@ to sum a_pj R_j / sum a_pj (polar projection), t_p = sum a_pj t_j / sum a_pj.
 One outer ICP iteration:
 
 1. s_p = R_p x_p + t_p; correspondence = nearest target point d_p (its normal n_p), pairs at
-   ``max_correspondence`` or farther ignored (no reciprocity, not one-to-one).
+   ``max_correspondence`` or farther ignored (no reciprocity, not one-to-one). That is the
+   reference's search (``correspondences = "previous-to-coarse"``); ``coarse-to-previous`` pairs
+   every target point d with its nearest s_p instead (cilantro's other direction: a source point
+   gets several pairs or none, so parts of P that the partial scan Q never saw get no data term
+   and follow the regularisation only; the greenhouse rows' default, docs/greenhouse.md
+   #registration), ``both`` takes the pairs of both directions.
 2. Gauss-Newton on an incremental parameter vector theta (per node ZYX Euler angles a, b, c and a
    translation tau), theta = 0 at the start: data residual n_p^T (R(theta_p) s_p + tau_p - d_p) with
    theta_p = sum_j (a_pj / A_p) theta_j, R = Rz(c) Ry(b) Rx(a), linearised about the current theta
@@ -92,6 +97,7 @@ def too_many_nodes(nodes: int, limit: int, spacing: float, prefix: str, spacing_
 
 
 SOLVERS = ("lu-cg", "cg", "direct")
+CORRESPONDENCES = ("previous-to-coarse", "coarse-to-previous", "both")
 
 
 @dataclass(frozen=True)
@@ -104,6 +110,11 @@ class WarpFieldConfig:
     graph *including the node itself* (k - 1 arcs per node), sigma = regularisation_sigma_factor x
     node_spacing (0.45 m). stiffness: regularisation weight; huber: Huber boundary on each parameter
     difference. max_correspondence: pairs this far apart or farther are ignored (m).
+    correspondences: the search direction, ``previous-to-coarse`` (every point of the previous
+    session P to its nearest point of the coarse cloud Q: the authors' setup, cilantro's default)
+    or ``coarse-to-previous`` (every point of Q to its nearest warped point of P: the unseen parts
+    of P get no data term, so a partial Q no longer pulls them onto what was seen; an unchanged row
+    stays put) or ``both``.
     normal_neighbours: k of the target normals. icp_* / gn_* / cg_*: iteration limits and stop
     tolerances (see the module docstring). solver: ``lu-cg`` (CG preconditioned by a reused LU),
     ``cg`` (Eigen's Jacobi CG, as cilantro) or ``direct`` (an LU per system).
@@ -125,6 +136,7 @@ class WarpFieldConfig:
     icp_tolerance: float = 2.5e-3
     gn_iterations: int = 10
     gn_tolerance: float = 5e-4
+    correspondences: str = "previous-to-coarse"
     solver: str = "lu-cg"
     cg_iterations: int = 500
     cg_tolerance: float = 1e-5
@@ -148,6 +160,9 @@ class WarpFieldConfig:
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < low:
                 raise ConfigError(f"WarpFieldConfig.{name} must be an integer >= {low}, got {v!r}")
+        if self.correspondences not in CORRESPONDENCES:
+            raise ConfigError(f"WarpFieldConfig.correspondences must be one of {', '.join(CORRESPONDENCES)}, "
+                              f"got {self.correspondences!r}")
         if self.solver not in SOLVERS:
             raise ConfigError(f"WarpFieldConfig.solver must be one of {', '.join(SOLVERS)}, got {self.solver!r}")
         if not isinstance(self.centre, bool):
@@ -497,14 +512,19 @@ def _sqrt_huber(x, delta):
     return value, np.where(x < 0, -slope, slope)
 
 
-def _normal_equations(graph: _Graph, theta, s, d, n, mask, config: WarpFieldConfig):
+def _normal_equations(graph: _Graph, theta, s, d, n, mask, config: WarpFieldConfig, source=None):
     """J^T J (BSR, 6M x 6M), J^T r (6M,) and the cost |r|^2 at the increment theta (M, 6).
 
-    s, d, n: (3, N) component-major current source points, their correspondences and the target
-    normals; mask (N,) 1 for the points with a correspondence, 0 otherwise.
+    s (3, N): the current source points, component-major. ``source`` None (the reference's
+    previous -> coarse search): d, n (3, N) the correspondence and its target normal of every
+    source point, mask (N,) 1 for the points with a correspondence, 0 otherwise. ``source`` (C,)
+    source indices: C correspondences (d, n (3, C), mask (C,)), a source point may have several
+    or none (cilantro's coarse -> previous search).
     """
     M = graph.n_nodes
     tb = np.ascontiguousarray(np.asarray(graph.blend @ theta).T)  # (6, N) per-point averages
+    if source is not None:
+        tb, s = tb[:, source], s[:, source]
     Rs, dA, dB, dC = _euler_apply(tb[:3], s)
     g = np.empty((6, len(mask)))  # d r_p / d theta_bar_p, one row per parameter
     for row, dv in enumerate((dA, dB, dC)):
@@ -516,13 +536,18 @@ def _normal_equations(graph: _Graph, theta, s, d, n, mask, config: WarpFieldConf
     Rs += tb[3:]
     Rs -= d
     r = g[3] * Rs[0] + g[4] * Rs[1] + g[5] * Rs[2]  # n^T (R s + tau - d), 0 without a match
+    products = g[_UPPER[0]] * g[_UPPER[1]]  # (21, N or C): the distinct entries of g g^T
+    g *= r
+    if source is not None:  # sum the correspondences of every source point
+        gather = sparse.csr_matrix((np.ones(len(source)), (source, np.arange(len(source)))),
+                                   shape=(graph.blend.shape[0], len(source)))
+        products = (gather @ products.T).T
+        g = (gather @ g.T).T
     blocks = np.zeros((len(graph.indices), 36))
-    products = g[_UPPER[0]] * g[_UPPER[1]]  # (21, N): the distinct entries of g g^T
     pair_blocks = np.asarray(graph.pairs @ products.T)[:, _FULL]
     blocks[graph.pair_pos] = pair_blocks
     off = graph.pair_pos_t >= 0
     blocks[graph.pair_pos_t[off]] = pair_blocks[off]
-    g *= r
     grad = np.asarray(graph.blend_t @ g.T)
     cost = float(r @ r)
     if len(graph.arc_i):
@@ -618,12 +643,12 @@ class _LinearSolver:
         return x
 
 
-def _gauss_newton(graph: _Graph, s, d, n, mask, solve: _LinearSolver, config: WarpFieldConfig):
-    """The increment theta (M, 6) of one outer iteration and its GN steps (s, d, n, mask as in
-    :func:`_normal_equations`)."""
+def _gauss_newton(graph: _Graph, s, d, n, mask, solve: _LinearSolver, config: WarpFieldConfig, source=None):
+    """The increment theta (M, 6) of one outer iteration and its GN steps (s, d, n, mask, source
+    as in :func:`_normal_equations`)."""
     theta = np.zeros((graph.n_nodes, 6))
     for step in range(1, config.gn_iterations + 1):
-        H, grad, _ = _normal_equations(graph, theta, s, d, n, mask, config)
+        H, grad, _ = _normal_equations(graph, theta, s, d, n, mask, config, source)
         delta = solve(H, -grad).reshape(-1, 6)
         theta += delta
         if np.max(np.einsum("ij,ij->i", delta, delta)) < config.gn_tolerance**2:
@@ -650,6 +675,22 @@ def _nearest(tree, points, config: WarpFieldConfig):
 
 
 _FIRST_BOUND = 0.1  # share of max_correspondence searched first
+
+
+def _coarse_to_previous(tree, Q, s, live, config: WarpFieldConfig):
+    """Correspondences (source indices, target indices) searched from the coarse cloud Q onto the
+    current source points s (only those with anchors, ``live``): every target point pairs with its
+    nearest source point closer than ``max_correspondence`` (a source point may get several or
+    none); ``both`` adds the previous -> coarse pairs (cilantro's ``BOTH``)."""
+    dist, nearest = cKDTree(s[live]).query(Q, distance_upper_bound=config.max_correspondence,
+                                           workers=config.workers)
+    keep = np.flatnonzero(dist < config.max_correspondence)
+    source, target = live[nearest[keep]], keep
+    if config.correspondences == "both":
+        dist, nearest = _nearest(tree, s[live], config)
+        ok = dist < config.max_correspondence
+        source, target = np.concatenate([source, live[ok]]), np.concatenate([target, nearest[ok]])
+    return source, target
 
 
 def _check_units(P, Q) -> None:
@@ -688,10 +729,18 @@ def register_warp_field(previous, coarse, config: WarpFieldConfig | None = None,
     s = P0.copy()  # the dense field starts at the identity
     norms, gn_total, matches = [], 0, 0
     solve = _LinearSolver(config)
+    live = np.flatnonzero(graph.live)
     for outer in range(config.icp_iterations):
-        dist, nearest = _nearest(tree, s, config)
-        valid = graph.live & (dist < config.max_correspondence)
-        matches = int(valid.sum())
+        if config.correspondences == "previous-to-coarse":
+            dist, nearest = _nearest(tree, s, config)
+            valid = graph.live & (dist < config.max_correspondence)
+            matches = int(valid.sum())
+            source, target = None, np.where(valid, nearest, 0)
+            mask = valid.astype(np.float64)
+        else:
+            source, target = _coarse_to_previous(tree, Q0, s, live, config)
+            matches = len(source)
+            mask = np.ones(matches)
         if matches == 0:
             if outer == 0:
                 raise PointCloudError(
@@ -699,10 +748,8 @@ def register_warp_field(previous, coarse, config: WarpFieldConfig | None = None,
                     f"coarse cloud Q: the clouds do not overlap (one frame? both in metres?)")
             norms.append(0.0)
             break
-        nearest = np.where(valid, nearest, 0)
-        mask = valid.astype(np.float64)
-        theta, gn_steps = _gauss_newton(graph, np.ascontiguousarray(s.T), Q0_rows[:, nearest],
-                                        normal_rows[:, nearest], mask, solve, config)
+        theta, gn_steps = _gauss_newton(graph, np.ascontiguousarray(s.T), Q0_rows[:, target],
+                                        normal_rows[:, target], mask, solve, config, source)
         gn_total += gn_steps
         dR, tau = euler_zyx(theta[:, :3]), theta[:, 3:]
         R = nearest_rotation(dR @ R)
