@@ -40,6 +40,7 @@ from tpvp.viewspace import get_view_space
 SCALES = ("normalised", "native")
 UP_AXES = ("+z", "-z", "+y", "-y", "+x", "-x")
 FRAMES = ("current", "previous")  # the scan that defines the planning frame
+COARSE_POINTS = ("centroids", "centres")  # what an observed voxel adds to a row's passive reconstruction
 PAPER_NOISE_LEVELS = ((0.0, 0.0), (0.002, 0.5), (0.005, 1.0), (0.01, 2.0))  # Table VII: (sigma_t m, sigma_r deg)
 ICP_METHODS = ("point_to_plane", "point_to_point")
 
@@ -359,7 +360,10 @@ class RowConfig:
     spacing (0.15 m, not derived) and searches the warp field's correspondences from the partial
     coarse scan onto the previous session (``coarse-to-previous``, not the authors'
     ``previous-to-coarse``: docs/greenhouse.md#registration). protocol: what the experiments sweep (Tables V-VI);
-    pose_noise: the Table VII study; blockwise: the Block-wise NBV baseline.
+    pose_noise: the Table VII study; blockwise: the Block-wise NBV baseline. coarse: what an
+    observed voxel adds to the passive reconstruction Q: ``centroids`` (the points seen in it,
+    reduced to their centroid, as the authors' reference is) or ``centres`` (its centre: all a depth
+    image of the simulator's voxel geometry can give, see ``tpvp session``).
     """
 
     name: str = "paper-row"
@@ -380,12 +384,15 @@ class RowConfig:
     protocol: RowProtocolConfig = field(default_factory=RowProtocolConfig)
     pose_noise: PoseNoiseConfig = field(default_factory=PoseNoiseConfig)
     blockwise: BlockwiseNbvConfig = field(default_factory=BlockwiseNbvConfig)
+    coarse: str = "centroids"
 
     setting = "row"
 
     def __post_init__(self):
         _positive(self, "gt_resolution", "oracle_grid")
         _integer(self, "seed", minimum=0)
+        if self.coarse not in COARSE_POINTS:
+            raise ConfigError(f"coarse must be one of {', '.join(COARSE_POINTS)}, got {self.coarse!r}")
 
 
 SETTINGS = {"plant": PlantConfig, "row": RowConfig}

@@ -117,7 +117,8 @@ def build_row_scene(previous_points, current_points, config: RowConfig = RowConf
     if len(oracle) == 0:
         raise PointCloudError(f"{names[1]}: no voxel of the row is visible from {room_cfg.room}'s view box")
     current = voxels.voxel_centroids(current, resolution)
-    return RowScene(room_cfg, previous, current, grid, oracle, passive, seen, observed_points(grid, current)[seen],
+    observed = observed_points(grid, current) if config.coarse == "centroids" else grid.centres
+    return RowScene(room_cfg, previous, current, grid, oracle, passive, seen, observed[seen],
                     room_cfg.initial_positions[first_view[seen]], config.sensor, tuple(names), timings, from_cache,
                     date)
 

@@ -46,6 +46,11 @@ def npy_bytes(array: np.ndarray) -> bytes:
     return buffer.getvalue()
 
 
+def centroid_file(record: dict) -> str:
+    """The file of a capture's per-voxel point centroids, beside its voxel keys."""
+    return record["file"].replace(".npy", "_centroids.npy")
+
+
 @dataclass(frozen=True)
 class Request:
     """The next pose to capture (world frame), or nothing to capture (``view`` None; ``role`` says
@@ -96,8 +101,8 @@ class Session:
         raise NotImplementedError
 
     def _keep(self, keys: np.ndarray) -> np.ndarray:
-        """The captured voxels (keys) that belong to the plants (all, unless a subclass drops some)."""
-        return keys
+        """Which captured voxels (keys) belong to the plants (all, unless a subclass drops some)."""
+        return np.ones(len(keys), dtype=bool)
 
     # -- the folder -------------------------------------------------------------------------------
 
@@ -236,8 +241,8 @@ class Session:
         # A cloud is placed by whoever exported it: most of it must lie near the plants.
         if near.mean() < MIN_INSIDE:
             raise PointCloudError(self._far_message(points, near, source))
-        keys = self._keep(voxels.voxelise(planning[near], self.config.gt_resolution))
-        return self._add_keys(keys, view, source, "cloud", len(points), int(near.sum()))
+        keys = voxels.voxel_keys(planning[near], self.config.gt_resolution)
+        return self._add_voxels(keys, planning[near], view, source, "cloud", len(points))
 
     def add_depth(self, depth, intrinsics, view: int, source: str) -> dict:
         """Fuse a depth image (metres) captured at ``view`` with ``intrinsics``. It is placed by the
@@ -253,14 +258,23 @@ class Session:
                                   f"depth); is it the depth of view {view}, in metres (--intrinsics depth_scale)?")
         keys = surface_voxel_keys(planning[near], rays[near] @ self.scene.plant_from_scan[:3, :3].T,
                                   self.config.gt_resolution)
-        return self._add_keys(self._keep(voxels.unique_keys(keys)), view, source, "depth", len(points),
-                              int(near.sum()))
+        return self._add_voxels(keys, planning[near], view, source, "depth", len(points))
 
-    def _add_keys(self, keys, view, source, kind, points, kept) -> dict:
+    def _add_voxels(self, keys, points, view, source, kind, total) -> dict:
+        """Record a capture: its voxels (keys of ``points``, planning frame; code order), those the
+        plants hold, and the centroid of its points in each (``captures/NNN_centroids.npy``)."""
+        codes, inverse = np.unique(voxels.encode_keys(keys), return_inverse=True)
+        counts = np.bincount(inverse, minlength=len(codes)).astype(np.float64)
+        centroids = np.stack([np.bincount(inverse, weights=points[:, a], minlength=len(codes)) for a in range(3)],
+                             axis=1) / counts[:, None]
+        keys = voxels.decode_keys(codes)
+        kept = self._keep(keys)
+        keys, centroids = keys[kept], centroids[kept]
         index = len(self.captures)
         record = {"view": int(view), "file": f"captures/{index:03d}.npy", "source": str(source), "kind": kind,
-                  "points": int(points), "points_kept": kept, "voxels": int(len(keys)), "added_utc": _now()}
-        self.commit({record["file"]: npy_bytes(keys)}, dict(self.state, captures=[*self.captures, record]))
+                  "points": int(total), "points_kept": int(len(points)), "voxels": int(len(keys)), "added_utc": _now()}
+        self.commit({record["file"]: npy_bytes(keys), centroid_file(record): npy_bytes(centroids)},
+                    dict(self.state, captures=[*self.captures, record]))
         return record
 
     def _far_message(self, points, near, source) -> str:

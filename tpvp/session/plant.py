@@ -112,10 +112,10 @@ class PlantSession(Session):
         table: it occludes but is not the plant, as in the simulator."""
         table = self.scene.table_points
         if not len(table):
-            return keys
+            return np.ones(len(keys), dtype=bool)
         top = table[:, 2].max() + 0.5 * self.config.scene.table_resolution
         resolution = self.config.gt_resolution
-        return keys[(keys[:, 2] + 1) * resolution > top + 1e-9 * resolution]
+        return (keys[:, 2] + 1) * resolution > top + 1e-9 * resolution
 
     def plan(self, overrides: dict | None = None, progress=None):
         """Plan on the captures (``overrides``: configuration keys for this plan, e.g. the

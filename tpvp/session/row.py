@@ -19,7 +19,7 @@ from tpvp.errors import ConfigError
 from tpvp.experiments.greenhouse import RowScene, check_row, plan_row_case, row_transfer
 from tpvp.scene import voxels
 from tpvp.scene.boxes import room_config
-from tpvp.session.folder import KINDS, Request, Session
+from tpvp.session.folder import KINDS, Request, Session, centroid_file
 
 
 @dataclass(frozen=True, eq=False)
@@ -71,19 +71,23 @@ class RowSession(Session):
         return np.all(np.abs(planning - box.center) <= 1.5 * box.half_extent.max(), axis=1)
 
     def row_scene(self) -> RowScene:
-        """The row pipeline's scene from the passive captures: the coarse reconstruction (their
-        voxel centres, key order) and, per voxel, the first passive view that saw it."""
-        passive = [(view, keys) for (view, _), keys in zip(self.observations(), self.capture_keys())
-                   if view < self.warm_up_views()]
+        """The row pipeline's scene from the passive captures: the coarse reconstruction (key
+        order; per voxel the centroid of the points the first passive view that saw it captured
+        there, or the voxel centre: ``config.coarse``) and, per voxel, that view's position."""
+        passive = sorted((c["view"], i) for i, c in enumerate(self.captures) if c["view"] < self.warm_up_views())
         if not passive:
             raise ConfigError(f"{self.folder}: no passive-sweep capture yet: add view 0 first (`tpvp session add`)")
-        codes = [voxels.encode_keys(keys) for _, keys in passive]
+        records = [self.captures[i] for _, i in passive]
+        codes = [voxels.encode_keys(np.load(self.folder / r["file"], allow_pickle=False)) for r in records]
         union = np.unique(np.concatenate(codes))
-        first = np.full(len(union), len(self.scene.room.initial_positions), dtype=np.int64)
-        for (view, _), code in zip(passive, codes):
-            at = np.searchsorted(union, code)
-            first[at] = np.minimum(first[at], view)
+        first = np.full(len(union), -1, dtype=np.int64)
         coarse = voxels.key_centres(voxels.decode_keys(union), self.config.gt_resolution)
+        for (view, _), record, code in zip(passive, records, codes):  # lowest view first
+            at = np.searchsorted(union, code)
+            new = first[at] < 0
+            first[at[new]] = view
+            if self.config.coarse == "centroids":
+                coarse[at[new]] = np.load(self.folder / centroid_file(record), allow_pickle=False)[new]
         room = self.scene.room
         return RowScene(room, self.scene.previous, None, None, None, None, None, coarse,
                         room.initial_positions[first], self.config.sensor, self.scene.names)

@@ -15,7 +15,7 @@ import numpy as np
 
 from tpvp.scene.simulator import build_scene, observation
 from tpvp.sensor.sensor import depth_image
-from tpvp.experiments.greenhouse import build_row_scene
+from tpvp.experiments.greenhouse import build_row_scene, observed_points
 from tpvp.session.plant import PlantSession
 from tpvp.visibility import safe_visibility
 
@@ -57,10 +57,12 @@ class RowStandInCamera:
         self.scene = build_row_scene(previous, current, config, names, cache_dir=cache_dir)
 
     def cloud(self, position, look_at) -> np.ndarray:
-        """The voxel centres the pose observes of today's row (room frame)."""
-        seen = safe_visibility(self.scene.grid, np.reshape(position, (1, 3)), np.reshape(look_at, (1, 3)),
-                               self.scene.sensor)
-        return self.scene.grid.centres[seen[0].indices]
+        """What the pose observes of today's row (room frame): per voxel seen, the centroid of the
+        row's points in it (``coarse = centroids``) or its centre, as the simulator's passive sweep."""
+        scene = self.scene
+        seen = safe_visibility(scene.grid, np.reshape(position, (1, 3)), np.reshape(look_at, (1, 3)), scene.sensor)
+        points = observed_points(scene.grid, scene.current) if self.config.coarse == "centroids" else scene.grid.centres
+        return points[seen[0].indices]
 
     def depth(self, position, look_at) -> np.ndarray:
         """The depth image (metres, NaN where nothing is seen) of the pose, every pixel."""
