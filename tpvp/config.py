@@ -263,16 +263,20 @@ class RowTargetsConfig:
 @dataclass(frozen=True)
 class RowProtocolConfig:
     """What the row experiments sweep (Tables V-VI): Ours' covering voxels (m), the random
-    baselines' budgets and repetitions, Block-wise NBV's budgets (prefixes of one run of the
-    largest)."""
+    baselines' budgets and repetitions, Block-wise NBV's budgets and how they are run
+    (``nbv_runs``: ``separate``, one run per budget, the paper's protocol: a run spreads its budget
+    over the row's blocks; ``prefix``, the first views of one run of the largest budget)."""
 
     cover_resolutions: tuple = (0.10, 0.05, 0.04, 0.03)
     budgets: tuple = (100, 300, 500)
     repetitions: int = 5
     nbv_budgets: tuple = (100, 300, 500)
+    nbv_runs: str = "separate"
 
     def __post_init__(self):
         _integer(self, "repetitions", minimum=1)
+        if self.nbv_runs not in ("separate", "prefix"):
+            raise ConfigError(f"protocol.nbv_runs must be separate or prefix, got {self.nbv_runs!r}")
         for name, kind in (("cover_resolutions", float), ("budgets", int), ("nbv_budgets", int)):
             values = tuple(getattr(self, name))
             if not values or any(isinstance(v, bool) or not isinstance(v, (int, float)) or not v > 0
