@@ -75,6 +75,12 @@ class PlanningFrame:
         return self.reference.transform(points if np.array_equal(self.up, np.eye(3)) else points @ self.up.T)
 
 
+def scan_points(plant_from_scan: np.ndarray, points) -> np.ndarray:
+    """Planning-frame ``points`` back in the scan's own frame (the inverse of ``plant_from_scan``)."""
+    matrix = np.asarray(plant_from_scan, dtype=np.float64)
+    return (np.asarray(points, dtype=np.float64) - matrix[:3, 3]) @ np.linalg.inv(matrix[:3, :3]).T
+
+
 def planning_frame(reference_scan, config, name: str = "reference scan") -> PlanningFrame:
     """The planning frame that ``reference_scan`` (its own frame, metres) defines under ``config``."""
     up = up_rotation(config.scene.up_axis)

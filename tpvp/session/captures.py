@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from tpvp.errors import InputFileError
-from tpvp.sensor.camera import Intrinsics, look_at_rotation
+from tpvp.sensor.camera import Intrinsics
 
 #: A depth point this close to a voxel face (in voxels) lies on it: see :func:`surface_voxel_keys`.
 FACE_TOLERANCE = 1e-6
@@ -119,14 +119,10 @@ def surface_voxel_keys(points: np.ndarray, rays: np.ndarray, resolution: float) 
 
 @dataclass(frozen=True)
 class Pose:
-    """A camera pose in the world frame: position, look-at point and the camera-to-world rotation."""
+    """A camera pose in the world frame: position and look-at point."""
 
     position: np.ndarray
     look_at: np.ndarray
-
-    @property
-    def rotation(self) -> np.ndarray:
-        return look_at_rotation(self.position, self.look_at)
 
 
 def read_pose_file(path) -> Pose:

@@ -154,23 +154,22 @@ class Session:
             raise InputFileError(f"{folder / 'previous.npy'}: unreadable ({exc})") from None
         return KINDS[state["kind"]](folder, load_config(folder / "config.yaml"), state, previous)
 
-    def commit(self, files: dict, state: dict) -> None:
-        """Write ``files`` (relative name -> bytes or text) and the new state in one step."""
+    def commit(self, state: dict, files: dict | None = None, write=None) -> None:
+        """Write ``files`` (relative name -> bytes or text), what ``write(staging folder)`` writes
+        and the new state, in one step."""
         with staged_folder(self.folder, keep_existing=True, what="session folder") as stage:
-            for name, data in files.items():
+            for name, data in (files or {}).items():
                 writer = atomic_write_text if isinstance(data, str) else atomic_write_bytes
                 writer(stage.path(name), data)
+            if write is not None:
+                write(stage.folder)
             atomic_write_text(stage.path(STATE), json.dumps(state, indent=1) + "\n")
         self.state = state
 
     def commit_plan(self, write_outputs, plan: dict) -> None:
         """Write ``plan/`` (``write_outputs(folder)``) and record ``plan`` in the state, in one step."""
-        with staged_folder(self.folder, keep_existing=True, what="session folder") as stage:
-            (stage.folder / "plan").mkdir(exist_ok=True)
-            write_outputs(stage.folder / "plan")
-            state = dict(self.state, plan={**plan, "planned_utc": _now()})
-            atomic_write_text(stage.path(STATE), json.dumps(state, indent=1) + "\n")
-        self.state = state
+        self.commit(dict(self.state, plan={**plan, "planned_utc": _now()}),
+                    write=lambda staged: write_outputs(staged / "plan"))
 
     # -- poses ------------------------------------------------------------------------------------
 
@@ -273,8 +272,8 @@ class Session:
         index = len(self.captures)
         record = {"view": int(view), "file": f"captures/{index:03d}.npy", "source": str(source), "kind": kind,
                   "points": int(total), "points_kept": int(len(points)), "voxels": int(len(keys)), "added_utc": _now()}
-        self.commit({record["file"]: npy_bytes(keys), centroid_file(record): npy_bytes(centroids)},
-                    dict(self.state, captures=[*self.captures, record]))
+        self.commit(dict(self.state, captures=[*self.captures, record]),
+                    {record["file"]: npy_bytes(keys), centroid_file(record): npy_bytes(centroids)})
         return record
 
     def _far_message(self, points, near, source) -> str:

@@ -26,7 +26,7 @@ from tpvp.config import PlantConfig, with_overrides
 from tpvp.experiments.single_plant import plan_case, transfer
 from tpvp.nbv.warm_up import start_nbv
 from tpvp.scene import voxels
-from tpvp.scene.simulator import planning_frame
+from tpvp.scene.simulator import planning_frame, scan_points
 from tpvp.session.folder import KINDS, Request, Session
 
 
@@ -48,8 +48,7 @@ class SessionScene:
 
     def to_scan(self, points) -> np.ndarray:
         """Planning-frame points in the world (the previous model's) frame."""
-        matrix = self.plant_from_scan
-        return (np.asarray(points, dtype=np.float64) - matrix[:3, 3]) @ np.linalg.inv(matrix[:3, :3]).T
+        return scan_points(self.plant_from_scan, points)
 
     def to_planning(self, points) -> np.ndarray:
         matrix = self.plant_from_scan

@@ -13,7 +13,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from tpvp.scene.simulator import build_scene, observation
+from tpvp.scene.simulator import build_scene, observation, scan_points
 from tpvp.sensor.sensor import depth_image
 from tpvp.experiments.greenhouse import build_row_scene, observed_points
 from tpvp.session.plant import PlantSession
@@ -28,13 +28,9 @@ class StandInCamera:
         self.config = PlantSession.session_config(config)
         self.scene = build_scene(previous, current, self.config, names)
 
-    def _to_world(self, points) -> np.ndarray:
-        matrix = self.scene.plant_from_scan
-        return (np.asarray(points, dtype=np.float64) - matrix[:3, 3]) @ np.linalg.inv(matrix[:3, :3]).T
-
     def cloud(self, view: int) -> np.ndarray:
         """What ``view`` observes of today's plant: voxel centres in the world frame."""
-        return self._to_world(observation(self.scene, view))
+        return scan_points(self.scene.plant_from_scan, observation(self.scene, view))
 
     def depth(self, view: int) -> np.ndarray:
         """The depth image (metres, NaN where nothing is seen) of ``view`` at the sensor's
