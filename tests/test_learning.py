@@ -312,3 +312,28 @@ def test_cli_names_a_missing_dataset(tmp_path, capsys):
 
     assert main(["train", "--data", str(tmp_path / "nowhere"), "--out", str(tmp_path / "out"), "--no-progress"]) == 2
     assert "nowhere: no manifest.json" in capsys.readouterr().err
+
+
+def test_cli_evaluates_the_states_of_a_given_size(tiny_dataset, tmp_path, capsys):
+    """``evaluate --executed 2`` adds a row per split for the two-view states, the same numbers as
+    evaluating those rows directly."""
+    import pandas as pd
+
+    from tpvp.learning.__main__ import main
+    from tpvp.learning.training import evaluate
+    from tpvp.learning.weights import load_weights, shipped_path
+
+    data, _ = tiny_dataset
+    assert main(["evaluate", "--data", str(data.folder), "--kinds", "ma-scvp", "--executed", "2",
+                 "--out", str(tmp_path)]) == 0
+    table = pd.read_csv(tmp_path / "evaluation.csv")
+    assert table["executed"].astype(str).tolist() == ["all", "2", "all", "2"]
+    test = data.split("test")
+    two = test[np.asarray(data["states"])[test].sum(axis=1) == 2]
+    model, _ = load_weights(shipped_path("ma-scvp"), "ma-scvp")
+    row = table[(table["split"] == "test") & (table["executed"].astype(str) == "2")].iloc[0]
+    assert row["states"] == len(two) > 0
+    assert row["recall"] == pytest.approx(evaluate("ma-scvp", model, data, two)["recall"])
+    assert main(["evaluate", "--data", str(data.folder), "--kinds", "ma-scvp", "--executed", "40",
+                 "--out", str(tmp_path)]) == 2
+    assert "no validation state has 40 views executed" in capsys.readouterr().err

@@ -326,8 +326,13 @@ def _(tmp, scans):
 def _(tmp, scans, capsys):
     from tpvp.io import faults
 
-    with faults.inject("interrupt", 1):  # Ctrl-C as the first file is written
-        return run_cli(plan(scans / "day1.xyz", scans / "day2.xyz", output=tmp / "out"), capsys)
+    # SIGINT raises KeyboardInterrupt, as in a terminal: a test runner's worker may ignore it.
+    saved = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        with faults.inject("interrupt", 1):  # Ctrl-C as the first file is written
+            return run_cli(plan(scans / "day1.xyz", scans / "day2.xyz", output=tmp / "out"), capsys)
+    finally:
+        signal.signal(signal.SIGINT, saved)
 
 
 @row("data-tools-output-inside-input", 2, "data_tools greenhouse clean: error: dataset", "lies inside the input",

@@ -30,6 +30,7 @@ from tpvp.scene.boxes import ROOMS
 from tpvp.scene.normalise import check_session_pair
 from tpvp.scene.samples import load_sample
 from tpvp.session.cli import add_session_parser
+from tpvp.synthetic.scan import REFERENCES
 
 STAGES = ["compile", "scene", "warm-up NBV", "registration", "inflation", "visibility", "view selection",
           "path", "outputs"]
@@ -183,6 +184,8 @@ def _experiments_plants(args) -> int:
 
 
 def _row_config(args):
+    if args.dataset is not None and args.reference:
+        raise TpvpError(f"--reference applies to generated rows; the rows of {args.dataset} are used as they are")
     overrides = {"view_space": getattr(args, "room", "room1")}
     if args.cover_resolution is not None:
         overrides["selection.cover_resolution"] = args.cover_resolution
@@ -211,7 +214,7 @@ def _greenhouse(args) -> int:
     else:
         if not 0 <= args.pair <= 3:
             raise TpvpError(f"--pair {args.pair}: a generated row has sessions 0..4, pairs 0..3")
-        case = RowCase(args.room, args.pair, args.seed)
+        case = RowCase(args.room, args.pair, args.seed, reference=args.reference or "handheld")
     print(f"{case.name}: configuration {config.name!r}, covering voxel {100 * config.selection.cover_resolution:g} cm, "
           f"ground truth {100 * config.gt_resolution:g} cm")
     stages = ["scene and oracle", "registration", "inflation", "look-at targets", "visibility", "view selection",
@@ -249,7 +252,8 @@ def _greenhouse(args) -> int:
 
 def _experiments_rows(args) -> int:
     config = _row_config(args)
-    cases = row_experiments.default_row_cases(args.quick, args.dataset, tuple(args.rooms))
+    cases = row_experiments.default_row_cases(args.quick, args.dataset, tuple(args.rooms),
+                                              references=args.reference or ["handheld"])
     methods = args.methods or list(row_experiments.ALL_METHODS)
     where = f"the Dask cluster {args.scheduler}" if args.scheduler else f"{args.workers} local worker(s)"
     print(f"{len(cases)} cases x {len(methods)} methods on {where}; cache {args.cache}")
@@ -263,11 +267,16 @@ def _experiments_rows(args) -> int:
     return 0
 
 
-def _row_options(p, output):
+def _row_options(p, output, several_references: bool = False):
     configuration_options(p, output, "paper-row")
     p.add_argument("--dataset", type=Path, default=None,
                    help="a folder written by `python -m data_tools greenhouse clean` (Processed_3D_Model/"
                         "<room>_<date>.pcd; default: generated rows, offline)")
+    p.add_argument("--reference", nargs="+" if several_references else None, default=None, choices=REFERENCES,
+                   help="what of a generated row the reference holds: the complete row, what the room's candidate "
+                        "positions see, or an emulated handheld phone capture" +
+                        (" (several: each case once per reference, side by side in the tables)"
+                         if several_references else "") + " (default: handheld; docs/greenhouse.md)")
     p.add_argument("--cover-resolution", type=float, default=None, metavar="M",
                    help="covering voxel of the set cover (paper: 0.10, 0.05, 0.04, 0.03; default: the "
                         "configuration's, 0.04)")
@@ -332,7 +341,7 @@ def build_parser() -> argparse.ArgumentParser:
                        help="cache folder of per-task rows; an interrupted run resumes (default: %(default)s)")
     plant.set_defaults(func=_experiments_plants)
     rows = which.add_parser("rows", help="greenhouse rows: Tables V-VI (Ours, random prior ladder, upper limits)")
-    _row_options(rows, "outputs/experiments/rows")
+    _row_options(rows, "outputs/experiments/rows", several_references=True)
     rows.add_argument("--rooms", nargs="+", default=list(ROOMS), choices=ROOMS, help="(default: %(default)s)")
     rows.add_argument("--methods", nargs="+", default=None,
                       help="methods to run (default: coarse, blockwise-nbv, ours, prior-obb-random, prior-passive-random, "

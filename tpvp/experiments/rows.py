@@ -35,13 +35,14 @@ from tpvp.provenance import provenance
 from tpvp.registry import Registry
 from tpvp.scene.boxes import ROOMS, room_config
 from tpvp.synthetic.greenhouse import DATES, generate_row_sessions
-from tpvp.synthetic.scan import handheld_scan
+from tpvp.synthetic.scan import REFERENCES, reference_points
 from tpvp.viewspace.lookat import PRIORS
 from tpvp.viewspace.priors import AUTHORS_PRIORS
 from tpvp.visibility import coverage_ratio
-from tpvp.viz.rows import plot_row_frontier
+from tpvp.viz.rows import plot_blockwise_prefix, plot_row_frontier
 
 SESSIONS = 5
+PREFIX_STEP = 10  # views between the points of Block-wise NBV's prefix curve
 # --quick: a 2 cm ground truth (the oracle grid and the inflation voxels follow their rules: 0.2 m,
 # 2 cm), two covering voxels, fewer budgets and draws.
 QUICK = {"gt_resolution": 0.02, "protocol.cover_resolutions": (0.10, 0.05), "protocol.budgets": (100, 300),
@@ -65,7 +66,7 @@ class RowCase:
     seed: int = 0
     files: tuple = ()  # (previous file, current file) of a dataset; empty for a generated row
     point_spacing: float = 0.004
-    scanned: bool = True  # a generated row as a handheld scan would have captured it (tpvp.synthetic.scan)
+    reference: str = "handheld"  # what of a generated row the reference holds (tpvp.synthetic.scan.REFERENCES)
 
     @property
     def source(self) -> str:
@@ -78,7 +79,8 @@ class RowCase:
         return f"{self.room} seed {self.seed} sessions {self.previous}->{self.previous + 1}"
 
     def labels(self) -> dict:
-        return {"source": self.source, "room": self.room, "case": self.name, "previous_session": self.previous}
+        return {"source": self.source, "reference": "dataset" if self.files else self.reference, "room": self.room,
+                "case": self.name, "previous_session": self.previous}
 
     def config(self, base: RowConfig) -> RowConfig:
         """``base`` in this case's room."""
@@ -96,10 +98,9 @@ class RowCase:
         if self.files:
             return tuple(read_point_cloud(Path(f), units="m") for f in self.files)
         sessions = generate_row_sessions(self.room, self.seed, self.previous + 2, self.point_spacing)
-        pair = sessions[self.previous].points, sessions[self.previous + 1].points
-        if not self.scanned:
-            return pair
-        return tuple(points[handheld_scan(points, room_config(self.room))] for points in pair)
+        room = room_config(self.room)
+        return tuple(reference_points(sessions[k].points, room, self.reference)
+                     for k in (self.previous, self.previous + 1))
 
 
 def dataset_cases(folder, rooms=ROOMS) -> list[RowCase]:
@@ -123,11 +124,15 @@ def dataset_cases(folder, rooms=ROOMS) -> list[RowCase]:
     return cases
 
 
-def default_row_cases(quick: bool = False, dataset=None, rooms=ROOMS, seed: int = 0) -> list[RowCase]:
-    """The paper's 8 cases (4 consecutive pairs of each room), or one in quick mode."""
-    cases = dataset_cases(dataset, rooms) if dataset is not None else \
-        [RowCase(room, k, seed) for room in rooms for k in range(SESSIONS - 1)]
-    return cases[:1] if quick else cases
+def default_row_cases(quick: bool = False, dataset=None, rooms=ROOMS, seed: int = 0,
+                      references=("handheld",)) -> list[RowCase]:
+    """The paper's 8 cases (4 consecutive pairs of each room) per reference of a generated row
+    (``references``; a dataset's rows are used as they are), or the first pair of each in quick mode."""
+    if dataset is not None:
+        cases = dataset_cases(dataset, rooms)
+        return cases[:1] if quick else cases
+    pairs = [(room, k) for room in rooms for k in range(SESSIONS - 1)][:1 if quick else None]
+    return [RowCase(room, k, seed, reference=reference) for reference in references for room, k in pairs]
 
 
 def quick_config(overrides: dict | None = None) -> RowConfig:
@@ -210,6 +215,11 @@ def blockwise(scene, config):
                      "coverage": coverage_ratio(np.flatnonzero(run.covered_after(budget)), scene.oracle),
                      "path_length_m": run.path_after(budget), "seconds_planning": float(np.sum(run.seconds[:budget])),
                      "seconds_per_iteration": float(np.mean(run.seconds[:budget]))})
+    # The prefix curve of the largest run (every PREFIX_STEP views), for the figure, not Table VI.
+    longest = runs[max(budgets)]
+    curve = longest.coverage_curve(scene.oracle)
+    rows += [{"prefix_of": int(max(budgets)), "views": int(n), "coverage": float(curve[n]),
+              "path_length_m": longest.path_after(n)} for n in range(PREFIX_STEP, max(budgets) + 1, PREFIX_STEP)]
     return rows
 
 
@@ -304,14 +314,19 @@ def tables(raw: pd.DataFrame) -> dict:
                    "seconds_planning", "seconds_task"):
         if column not in raw:
             raw[column] = np.nan
+    if "reference" not in raw:  # rows cached before the reference was a case label
+        raw["reference"] = "candidates"
+    # the references in REFERENCES order, the dataset's last (groups keep their first appearance)
+    raw = raw.sort_values("reference", kind="stable", key=lambda r: r.map({n: i for i, n in enumerate(REFERENCES)}))
     paper = paper_values()
-    upper = mean_std(raw[raw["method"].isin(["upper-limit", "upper-limit-authors"])], ["source", "prior"],
+    upper = mean_std(raw[raw["method"].isin(["upper-limit", "upper-limit-authors"])], ["source", "reference", "prior"],
                       columns=("coverage", "views"))
     upper = upper.merge(paper[paper["table"] == "V"][["prior", "coverage_mean", "coverage_std"]]
                         .rename(columns={"coverage_mean": "paper_coverage_mean", "coverage_std": "paper_coverage_std"}),
                         on="prior", how="left")
-    main = raw[~raw["method"].isin(["upper-limit", "upper-limit-authors"])].copy()
-    keys = ["source", "method", "budget", "cover_resolution_cm"]
+    curve = raw["prefix_of"].notna() if "prefix_of" in raw else pd.Series(False, index=raw.index)
+    main = raw[~raw["method"].isin(["upper-limit", "upper-limit-authors"]) & ~curve].copy()
+    keys = ["source", "reference", "method", "budget", "cover_resolution_cm"]
     # Repetitions of a random baseline: one value per case first, then mean ± std across cases.
     per_case = main.groupby(keys + ["case"], dropna=False, sort=False)[["views", "coverage", "path_length_m"]] \
         .mean().reset_index()
@@ -324,14 +339,18 @@ def tables(raw: pd.DataFrame) -> dict:
     timing_columns = [c for c in ("seconds_planning", "seconds_registration", "seconds_targets", "seconds_visibility",
                                   "seconds_selection", "seconds_path", "seconds_per_iteration", "seconds_oracle",
                                   "seconds_task") if c in raw]
-    timing = mean_std(main[main["method"] != "pose-noise"], ["source", "method", "cover_resolution_cm"],
+    timing = mean_std(main[main["method"] != "pose-noise"], ["source", "reference", "method", "cover_resolution_cm"],
                        columns=timing_columns)
     out = {"table5_upper_limit": upper, "table6_coverage_effort": table6[table6["method"] != "pose-noise"],
            "planning_time": timing}
+    if curve.any():
+        out["blockwise_prefix_curve"] = mean_std(raw[curve], ["source", "reference", "prefix_of", "views"],
+                                                 columns=("coverage", "path_length_m"))
     noise = raw[raw["method"] == "pose-noise"]
     if len(noise):
-        out["table7_pose_noise"] = pd.concat([summarise(rows).assign(source=source)
-                                              for source, rows in noise.groupby("source")], ignore_index=True)
+        out["table7_pose_noise"] = pd.concat([summarise(rows).assign(source=source, reference=reference)
+                                              for (source, reference), rows in noise.groupby(["source", "reference"])],
+                                             ignore_index=True)
     return out
 
 
@@ -350,6 +369,9 @@ def write_results(folder, raw: pd.DataFrame, config: RowConfig | None = None) ->
             atomic_write_text(stage.folder / f"{name}.md", markdown(table))
             written[name] = table
         plot_row_frontier(stage.folder / "figures" / "coverage_path_frontier.png", written["table6_coverage_effort"])
+        if "blockwise_prefix_curve" in written:
+            plot_blockwise_prefix(stage.folder / "figures" / "blockwise_prefix_curve.png",
+                                  written["blockwise_prefix_curve"], written["table6_coverage_effort"], paper_values())
         atomic_write_text(stage.folder / "config.yaml", config_yaml(config, "base configuration of the row experiments"))
         atomic_write_text(stage.folder / "provenance.json", json.dumps(provenance(config), indent=2) + "\n")
     return written

@@ -3,6 +3,7 @@
     python -m tpvp.learning generate --data ~/.cache/tpvp/learning/plants   # ~20 min on 2 cores
     python -m tpvp.learning train --data ~/.cache/tpvp/learning/plants --out outputs/learning
     python -m tpvp.learning evaluate --data ~/.cache/tpvp/learning/plants   # the shipped weights
+    python -m tpvp.learning evaluate --executed 2   # also the two-view states (Table I's MA-SCVP)
     python -m tpvp.learning all --out outputs/learning                       # generate + train
     python -m tpvp.learning all --quick --out /tmp/learning                  # a 1-minute smoke run
 
@@ -48,6 +49,9 @@ def _parser() -> argparse.ArgumentParser:
         p.add_argument("--out", type=Path, default=Path("outputs") / "learning",
                        help="weights, curves and metrics (train/all/evaluate)")
         p.add_argument("--weights", type=Path, default=None, help="evaluate: a folder of <kind>.pt (default: shipped)")
+        p.add_argument("--executed", nargs="+", type=int, default=None, metavar="N",
+                       help="evaluate: also the states with N views executed, one row per N (2: the state "
+                            "MA-SCVP sees in Table I, after the initial view and one NBV)")
         p.add_argument("--device", default="cpu", help="torch device for training, e.g. cuda (default cpu)")
         p.add_argument("--no-progress", action="store_true")
     return parser
@@ -104,6 +108,7 @@ def train(args) -> None:
 
 
 def evaluate(args) -> None:
+    import numpy as np
     import pandas as pd
 
     dataset = load_dataset(_data_folder(args))
@@ -112,8 +117,16 @@ def evaluate(args) -> None:
         path = args.weights / f"{kind}.pt" if args.weights else shipped_path(kind)
         model, _ = load_weights(path, kind)
         for split in ("validation", "test"):
-            rows.append({"kind": kind, "weights": str(path), "split": split,
-                         **training.evaluate(kind, model, dataset, dataset.split(split))})
+            states = dataset.split(split)
+            executed = dataset["states"][states].sum(axis=1)
+            for count in [None, *(args.executed or [])]:
+                chosen = states if count is None else states[executed == count]
+                if len(chosen) == 0:
+                    raise TpvpError(f"{dataset.folder}: no {split} state has {count} views executed "
+                                    f"(it has {', '.join(map(str, np.unique(executed)))})")
+                rows.append({"kind": kind, "weights": str(path), "split": split,
+                             "executed": "all" if count is None else count, "states": len(chosen),
+                             **training.evaluate(kind, model, dataset, chosen)})
     table = pd.DataFrame(rows)
     args.out.mkdir(parents=True, exist_ok=True)
     with atomic_path(args.out / "evaluation.csv") as tmp:

@@ -36,6 +36,29 @@ def plot_row_frontier(path, table6: pd.DataFrame, title: str = ""):
     return _save(fig, path, vector=True)
 
 
+def plot_blockwise_prefix(path, curve: pd.DataFrame, table6: pd.DataFrame, paper: pd.DataFrame, title: str = ""):
+    """Block-wise NBV: the coverage after every prefix of its longest run (a line per reference)
+    beside the runs of their own budget (markers) and the paper's (open markers)."""
+    fig, ax = plt.subplots(figsize=(7, 4.6))
+    runs = table6[table6["method"] == "blockwise-nbv"]
+    for colour, ((source, reference), rows) in zip(plt.rcParams["axes.prop_cycle"].by_key()["color"],
+                                                  curve.groupby(["source", "reference"], sort=False)):
+        label = reference if source == "generated" else source
+        ax.plot(rows["views"], rows["coverage_mean"], color=colour, label=f"prefixes of one run ({label})")
+        own = runs[(runs["source"] == source) & (runs["reference"] == reference)]
+        ax.plot(own["views_mean"], own["coverage_mean"], "o", color=colour, label=f"one run per budget ({label})")
+    published = paper[(paper["table"] == "VI") & (paper["method"] == "blockwise-nbv")]
+    ax.plot(published["views_mean"], published["coverage_mean"], "s", color="black", markerfacecolor="none",
+            label="paper")
+    ax.set_xlabel("views")
+    ax.set_ylabel("coverage of the oracle set (%)")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7, loc="lower right")
+    ax.set_title(title or "Block-wise NBV: prefixes of one run vs a run per budget")
+    fig.tight_layout()
+    return _save(fig, path)
+
+
 def plot_row_paths(path, box, row_points, plans: dict, title: str = ""):
     """Each plan's path from the top and the side, in the plant box frame. ``plans``: label ->
     ``(positions in execution order (n, 3), subtitle)``."""
