@@ -11,7 +11,8 @@ from scipy import sparse
 from tpvp.config import CALIBRATED_MISS_RATIO, CALIBRATED_WEIGHTED_MISS_RATIO, PlantConfig, SelectionConfig, make_config
 from tpvp.errors import ConfigError
 from tpvp.experiments.single_plant import PlanningSurface, selection_problem
-from tpvp.inflation.weights import SURFACE_CLASSES, SurfaceWeightsConfig, surface_classes, surface_weights
+from tpvp.inflation.weights import (SURFACE_CLASSES, SurfaceWeightsConfig, surface_area, surface_classes,
+                                   surface_weights)
 from tpvp.scene import voxels
 from tpvp.setcover.methods import SelectionProblem, set_cover
 
@@ -63,6 +64,34 @@ def test_surface_classes_hand_built():
     assert weights.tolist() == [0.25, 1.0, 2.0, 0.5]
     assert surface_weights([0, 3], SurfaceWeightsConfig(enabled=False)) is None
     assert len(SURFACE_CLASSES) == len(SurfaceWeightsConfig().class_weights) == 4
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_surface_area_equals_brute_force(seed):
+    """Distinct sub-voxels (half the resolution) of the cloud inside each planning voxel, by looping."""
+    rng = np.random.default_rng(seed)
+    resolution = 0.004
+    cloud = np.concatenate([rng.uniform(-0.02, 0.02, (200, 3)), rng.normal(0.0, 0.003, (200, 3))])
+    keys = voxels.voxelise(cloud, resolution)
+    area = surface_area(keys, resolution, cloud)
+    expected = [len({tuple(np.floor(p / (resolution / 2)).astype(int)) for p in cloud
+                     if tuple(np.floor(p / resolution).astype(int)) == tuple(k)}) for k in keys]
+    assert np.array_equal(area, expected) and area.max() > 1  # dense points fill several sub-voxels
+    # a planning voxel the cloud does not reach still counts 1; four subdivisions (nested) count at least as many
+    assert surface_area(np.array([[100, 100, 100]]), resolution, cloud).tolist() == [1]
+    fine = surface_area(keys, resolution, cloud, subdivisions=4)
+    assert np.all(fine >= area)
+
+
+def test_area_multiplies_the_class_weights():
+    config = SurfaceWeightsConfig(area=True, observed=1.0, transferred_near=0.5)
+    assert surface_weights([0, 1, 1], config, np.array([3, 1, 4])).tolist() == [3.0, 0.5, 2.0]
+    with pytest.raises(ConfigError, match="area"):
+        surface_weights([0, 1], config)
+    with pytest.raises(ConfigError, match="surface_weights.area"):
+        SurfaceWeightsConfig(area="yes")
+    with pytest.raises(ConfigError, match="subdivisions"):
+        surface_area([[0, 0, 0]], 0.004, np.zeros((1, 3)), subdivisions=0)
 
 
 @pytest.mark.parametrize("field", ["observed", "transferred_near", "transferred_far", "inflation", "near_voxels"])
@@ -122,14 +151,17 @@ def test_selection_problem_weights_only_below_a_target_of_one():
     """At the paper's target 1.0 the problem carries no weights (the full set cover is unchanged);
     below it the class weights and the weighted miss ratio; unweighted with weights disabled."""
     classes = np.array([0, 1, 2, 3, 0], dtype=np.int8)
-    surface = PlanningSurface(None, SimpleNamespace(centres=np.zeros((5, 3))), sparse.csr_matrix((4, 5)), classes, {})
+    area = np.array([1, 2, 3, 4, 1])
+    surface = PlanningSurface(None, SimpleNamespace(centres=np.zeros((5, 3))), sparse.csr_matrix((4, 5)), classes, area,
+                              {})
     transferred = SimpleNamespace(executed=[0], nbv=None)
     scene = SimpleNamespace(view_space=None)
     full = selection_problem(scene, PlantConfig(), transferred, surface)
     assert full.voxel_weights is None and full.planning_target == 1.0
     asked = make_config("plant", {"selection.coverage_target": 0.98, "view_space": "sphere"})
     weighted = selection_problem(scene, asked, transferred, surface)
-    assert np.array_equal(weighted.voxel_weights, asked.surface_weights.class_weights[classes])
+    expected = asked.surface_weights.class_weights[classes] * (area if asked.surface_weights.area else 1)
+    assert np.array_equal(weighted.voxel_weights, expected)
     assert weighted.planning_target == pytest.approx(1 - CALIBRATED_WEIGHTED_MISS_RATIO["sphere"] * 0.02)
     plain = selection_problem(scene, make_config("plant", {"selection.coverage_target": 0.98, "view_space": "sphere",
                                                            "surface_weights.enabled": False}), transferred, surface)

@@ -16,7 +16,7 @@ from scipy import sparse
 
 from tpvp.config import PlantConfig
 from tpvp.inflation import inflate
-from tpvp.inflation.weights import surface_classes, surface_weights
+from tpvp.inflation.weights import surface_area, surface_classes, surface_weights
 from tpvp.nbv.warm_up import warm_up
 from tpvp.path.local import predicted_size
 from tpvp.path.route import path_through
@@ -155,13 +155,14 @@ def run_case(scene: Scene, config: PlantConfig = PlantConfig(), progress=None,
 @dataclass(frozen=True, eq=False)
 class PlanningSurface:
     """The planning surface of a case and what the candidate views see of it: the inflation's
-    result (P~ u Q u I), the planning grid, the (views x planning voxels) visibility, the class of
-    each planning voxel (:func:`tpvp.inflation.weights.surface_classes`) and the stage timings."""
+    result (P~ u Q u I), the planning grid, the (views x planning voxels) visibility, the class and
+    the area of each planning voxel (:mod:`tpvp.inflation.weights`) and the stage timings."""
 
     inflated: object  # tpvp.inflation.InflationResult
     grid: object  # tpvp.scene.grid.OccupancyGrid
     visibility: object
     classes: np.ndarray
+    area: np.ndarray
     timings: dict
 
 
@@ -181,8 +182,9 @@ def planning_surface(scene: Scene, config: PlantConfig, transferred: Transfer, p
     resolution = config.selection.cover_resolution
     grid, visibility = planning_visibility(scene, inflated.planning, resolution)
     classes = surface_classes(grid.keys, resolution, warped, coarse, config.surface_weights.near_voxels * resolution)
+    area = surface_area(grid.keys, resolution, inflated.planning)
     timings["visibility"] = time.perf_counter() - t
-    return PlanningSurface(inflated, grid, visibility, classes, timings)
+    return PlanningSurface(inflated, grid, visibility, classes, area, timings)
 
 
 def selection_problem(scene: Scene, config: PlantConfig, transferred: Transfer,
@@ -192,7 +194,7 @@ def selection_problem(scene: Scene, config: PlantConfig, transferred: Transfer,
     selection = config.selection
     weights = None
     if selection.coverage_target < 1.0:
-        weights = surface_weights(surface.classes, config.surface_weights)
+        weights = surface_weights(surface.classes, config.surface_weights, surface.area)
     return SelectionProblem(surface.visibility, tuple(transferred.executed), scene.view_space,
                             surface.grid.centres, selection.planning_target(config.view_space, weights is not None),
                             voxel_weights=weights, nbv=transferred.nbv)
