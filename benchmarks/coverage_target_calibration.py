@@ -2,12 +2,19 @@
 (calibration), and whether a requested true coverage is delivered (evaluation).
 
 ``--mode calibrate`` (default seeds 10, 11, 12: disjoint from the evaluation seeds 0, 1, 2):
-each case's warm-up + registration is shared by every planning target t in --targets; the plan for
-t sees ceil(t x coverable) planning voxels (``selection.planning_miss_ratio = 1``: the target is
-applied to the prediction as it is). Printed per view space and planning target: views, true
-coverage of the oracle (mean, min), share of cases reaching 97 / 98 / 99 %, and for each asked
-true target (--asked) the smallest planning target whose mean reaches it with no case more than
-one point below, as a miss ratio (1 - planning) / (1 - asked).
+each case's warm-up + registration + planning surface (inflation, visibility, voxel classes) is
+shared by every planning target t in --targets and every class-weight combination of the grid
+(``surface_weights``, :func:`weight_grid`: the uncertain classes weighted down or up, and the
+unweighted surface); the plan for t sees t of the coverable planning weight
+(``selection.planning_miss_ratio = 1``: the target is applied to the prediction as it is), only
+the selection runs per grid point (no path: the views are the selected ones). Printed per view
+space, weights and planning target: views, views / the exact optimum for 98 % (perfect knowledge,
+same initial view), true coverage of the oracle (mean, min), share of cases reaching 97 / 98 /
+99 %; per weights and view space the smallest planning target whose mean reaches 98 % + MARGIN
+with no case below 97 % + MARGIN (and a miss ratio within MAX_MISS_RATIO), as a miss ratio
+(1 - planning) / (1 - 0.98); and the chosen
+rule: the weights with the smallest sum over the view spaces of views / optimum at their smallest
+passing targets (ties: fewer views).
 
 ``--mode evaluate`` (default seeds 0, 1, 2 plus the bundled real pair on its own rows): the plan
 for each asked true target with the library's calibrated rule (``planning_miss_ratio = None``)
@@ -29,6 +36,7 @@ import argparse
 import shlex
 import sys
 import time
+from dataclasses import replace
 from concurrent.futures import ProcessPoolExecutor
 from datetime import datetime, timezone
 from pathlib import Path
@@ -36,13 +44,53 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from tpvp.config import make_config, with_overrides
+from tpvp.config import CALIBRATED_WEIGHTED_MISS_RATIO, make_config, with_overrides
 from tpvp.io import atomic_write_text
 from tpvp.experiments import plants
 
 RESULTS = Path(__file__).resolve().parent / "results"
-CALIBRATION_TARGETS = (0.95, 0.97, 0.98, 0.985, 0.99, 0.995, 1.0)
+CALIBRATION_TARGETS = (0.98, 0.985, 0.9875, 0.99, 0.9925, 0.995, 0.99625, 0.9975, 0.99875, 0.9995)
 EVALUATION_TARGETS = (0.95, 0.98, 0.99, 1.0)
+# The class-weight grid of --mode calibrate: observed / transferred near / transferred far /
+# inflation weights, @ near_voxels (how far from Q a transferred voxel stays "near"), "area": times
+# each voxel's sub-voxel count. The uncertain classes weighted down (the rule's idea), up
+# (observed < 1), and by area; then the unweighted surface. A first grid on the same seeds (only
+# observed < 1, far and inflation 1 or 2, 0.5 or 1) did no better than the unweighted surface, and
+# the far and inflation classes hold under 1 % of the voxels at near_voxels 2.
+DOWN_WEIGHTS = ((0.5, 0.25), (0.5, 0.1), (0.25, 0.25), (0.25, 0.1), (0.1, 0.1))  # (near, far)
+DOWN_INFLATION = 0.1
+NEAR_VOXELS = (1.0, 2.0)
+UP_OBSERVED = (0.25, 0.5)
+AREA_WEIGHTS = ((1.0, 1.0, 1.0, 1.0), (1.0, 0.5, 0.25, 0.1), (1.0, 0.25, 0.25, 0.1), (0.5, 1.0, 1.0, 1.0))
+ASKED = 0.98
+# Points of true coverage the calibration seeds must clear above the requirement (mean >= 98 %,
+# no case below 97 %): some room for the seed-to-seed spread that made the first sphere rule miss
+# on the evaluation seeds (docs/results.md, "Coverage target").
+MARGIN = 0.001
+# Largest miss ratio a rule may take per view space: with the prior warm-up the unweighted sphere
+# needs r <= 0.25 on these seeds (results/coverage_target_calibrate_prior.md), and a rule must hold
+# for either warm-up NBV; this grid is run with the default (geometric) warm-up only.
+MAX_MISS_RATIO = {"sphere": 0.25}
+
+
+def weight_grid():
+    """Every class-weight combination of the calibration, then the unweighted surface (None)."""
+    names = ("observed", "transferred_near", "transferred_far", "inflation")
+
+    def combo(weights, near_voxels=2.0, area=False):
+        return {**dict(zip(names, weights)), "near_voxels": near_voxels, "area": area}
+
+    down = [combo((1.0, n, f, DOWN_INFLATION), k) for k in NEAR_VOXELS for n, f in DOWN_WEIGHTS]
+    up = [combo((o, 1.0, 1.0, 1.0)) for o in UP_OBSERVED]
+    area = [combo(w, area=True) for w in AREA_WEIGHTS]
+    return [*down, *up, *area, None]
+
+
+def _weights_label(weights) -> str:
+    if weights is None:
+        return "unweighted"
+    return "/".join(f"{weights[k]:g}" for k in ("observed", "transferred_near", "transferred_far", "inflation")) \
+        + f" @{weights['near_voxels']:g}" + (" area" if weights["area"] else "")
 
 
 def _base_config(nbv_method):
@@ -50,19 +98,39 @@ def _base_config(nbv_method):
 
 
 def _calibrate_case(case, targets, nbv_method=None) -> list[dict]:
-    from tpvp.experiments.single_plant import build_scene, run_case, transfer
+    from tpvp.experiments.baselines import optimum
+    from tpvp.experiments.single_plant import build_scene, planning_surface, selection_problem, transfer
+    from tpvp.inflation.weights import surface_classes
     from tpvp.jit import compile_kernels
+    from tpvp.setcover.methods import select_views
+    from tpvp.visibility import coverage_ratio, covered_voxels
 
     compile_kernels()
     config = case.config(_base_config(nbv_method))
     scene = build_scene(*case.instance.load(), config)
     shared = transfer(scene, config)
+    surface = planning_surface(scene, config, shared)
+    best = int(optimum(scene, config, targets=(ASKED,))["views"].iloc[0])
     rows = []
-    for target in targets:
-        result = run_case(scene, with_overrides(config, {
-            "selection.coverage_target": target, "selection.planning_miss_ratio": 1.0}), transferred=shared)
-        rows.append({**case.labels(), "target": target, "views": result.n_views, "coverage": result.coverage,
-                     "path_length_m": result.path_length, "optimal": result.selection.optimal})
+    for weights in weight_grid():
+        overrides = ({"surface_weights.enabled": False} if weights is None
+                     else {f"surface_weights.{k}": v for k, v in weights.items()})
+        near_voxels = 2.0 if weights is None else weights["near_voxels"]
+        classes = surface_classes(surface.grid.keys, surface.grid.resolution, shared.alignment.warped, shared.coarse,
+                                  near_voxels * surface.grid.resolution)
+        surface = replace(surface, classes=classes)
+        shares = np.bincount(classes, minlength=4) / len(classes)
+        for target in targets:
+            planned = with_overrides(config, {**overrides, "selection.coverage_target": target,
+                                              "selection.planning_miss_ratio": 1.0})
+            selection = select_views(selection_problem(scene, planned, shared, surface), planned.selection)
+            views = list(shared.executed) + [int(v) for v in selection.selected]
+            rows.append({**case.labels(), "weights": _weights_label(weights), "target": target,
+                         "views": len(views), "optimum_views": best,
+                         "coverage": coverage_ratio(covered_voxels(scene.truth_visibility, views), scene.oracle),
+                         "optimal": selection.optimal,
+                         **{f"share_{name}": share for name, share in zip(("observed", "near", "far", "inflation"),
+                                                                          shares)}})
     return rows
 
 
@@ -92,25 +160,41 @@ def _run(function, cases, targets, workers, nbv_method=None) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-def calibration_summary(raw: pd.DataFrame, asked=(0.95, 0.98, 0.99)) -> tuple[pd.DataFrame, pd.DataFrame]:
-    summary = raw.groupby(["view_space", "target"]).agg(
-        cases=("views", "size"), views_mean=("views", "mean"), views_std=("views", "std"),
+def calibration_summary(raw: pd.DataFrame, asked=ASKED, margin=MARGIN):
+    """(summary per view space, weights and planning target; per weights and view space the
+    smallest passing planning target; the chosen weights with their targets per view space)."""
+    raw = raw.assign(ratio=raw["views"] / raw["optimum_views"])
+    summary = raw.groupby(["view_space", "weights", "target"], sort=False).agg(
+        cases=("views", "size"), views_mean=("views", "mean"), ratio_mean=("ratio", "mean"),
         coverage_mean=("coverage", "mean"), coverage_min=("coverage", "min"),
         reach_97=("coverage", lambda c: (c >= 0.97).mean()), reach_98=("coverage", lambda c: (c >= 0.98).mean()),
         reach_99=("coverage", lambda c: (c >= 0.99).mean())).reset_index()
     rules = []
-    for space, group in summary.groupby("view_space"):
-        for want in asked:
-            ok = group[(group["coverage_mean"] >= want) & (group["coverage_min"] >= want - 0.01)]
-            planning = float(ok["target"].min()) if len(ok) else np.nan
-            rules.append({"view_space": space, "asked": want, "smallest planning target": planning,
-                          "miss ratio": (1 - planning) / (1 - want) if np.isfinite(planning) else np.nan})
-    return summary, pd.DataFrame(rules)
+    for (weights, space), group in summary.groupby(["weights", "view_space"], sort=False):
+        lowest = 1 - MAX_MISS_RATIO.get(space, np.inf) * (1 - asked)
+        ok = group[(group["coverage_mean"] >= asked + margin) & (group["coverage_min"] >= asked - 0.01 + margin)
+                   & (group["target"] >= lowest - 1e-12)]
+        row = ok.loc[ok["target"].idxmin()] if len(ok) else None
+        rules.append({"weights": weights, "view_space": space,
+                      "smallest planning target": float(row["target"]) if row is not None else np.nan,
+                      "miss ratio": (1 - float(row["target"])) / (1 - asked) if row is not None else np.nan,
+                      "views_mean": float(row["views_mean"]) if row is not None else np.nan,
+                      "ratio_mean": float(row["ratio_mean"]) if row is not None else np.nan,
+                      "coverage_mean": float(row["coverage_mean"]) if row is not None else np.nan,
+                      "coverage_min": float(row["coverage_min"]) if row is not None else np.nan})
+    rules = pd.DataFrame(rules)
+    score = rules.groupby("weights", sort=False).agg(ratio_sum=("ratio_mean", lambda r: r.sum(min_count=len(r))),
+                                                     views_sum=("views_mean", "sum"))
+    score = score.dropna().sort_values(["ratio_sum", "views_sum"], kind="stable")
+    chosen = rules[rules["weights"] == score.index[0]] if len(score) else rules.iloc[:0]
+    return summary, rules, chosen.reset_index(drop=True)
 
 
 def evaluation_summary(raw: pd.DataFrame) -> pd.DataFrame:
     raw = raw.assign(ratio=raw["views"] / raw["optimum_views"],
                      below=raw["coverage"] < raw["target"] - 0.01)
+    # Every case of a view space together (the 42-case protocol: generated and bundled) as source "all".
+    raw = pd.concat([raw, raw.assign(source="all")], ignore_index=True)
     summary = raw.groupby(["source", "view_space", "target"]).agg(
         cases=("views", "size"), views_mean=("views", "mean"), optimum_views_mean=("optimum_views", "mean"),
         ratio_mean=("ratio", "mean"), coverage_mean=("coverage", "mean"), coverage_min=("coverage", "min"),
@@ -151,9 +235,13 @@ def main() -> None:
     pd.set_option("display.width", 200)
     tables = []
     if calibrate:
-        summary, rules = calibration_summary(raw)
-        tables = [("summary (coverage in %)", summary),
-                  ("smallest planning target with mean >= asked and no case below asked - 1 point", rules)]
+        summary, rules, chosen = calibration_summary(raw)
+        passing = (f"mean >= {100 * (ASKED + MARGIN):g} % and no case below {100 * (ASKED - 0.01 + MARGIN):g} %, "
+                   f"miss ratio at most {MAX_MISS_RATIO}")
+        tables = [("chosen rule: weights observed/near/far/inflation with the smallest sum of views / optimum "
+                   "(coverage in %)", chosen),
+                  (f"smallest planning target with {passing}, per weights (coverage in %)", rules),
+                  ("summary (coverage in %)", summary)]
     else:
         tables = [("evaluation (coverage in %)", evaluation_summary(raw))]
     for _, table in tables:
@@ -163,9 +251,15 @@ def main() -> None:
     for title, table in tables:
         print(f"\n{title}:\n{table.round(4).to_string(index=False)}")
     nbv = f"_{args.nbv}" if args.nbv else ""
-    _write_results(Path(args.results) / f"coverage_target_{args.mode}{nbv}.md", tables,
-                   f"{len(cases)} cases x {len(targets)} targets, seeds {list(seeds)}, warm-up NBV "
-                   f"{args.nbv or make_config('plant').nbv.method}")
+    what = (f"{len(cases)} cases x {len(targets)} targets, seeds {list(seeds)}, warm-up NBV "
+            f"{args.nbv or make_config('plant').nbv.method}, {time.perf_counter() - started:.0f} s on {args.workers} workers")
+    if calibrate:
+        what += ("; calibrated: the class weights of surface_weights (observed/near/far/inflation @near_voxels: "
+                 + ", ".join(_weights_label(w) for w in weight_grid()) + ") and the planning target per view "
+                 "space, i.e. CALIBRATED_WEIGHTED_MISS_RATIO = (1 - planning target) / (1 - 0.98)")
+    else:
+        what += f"; rule: {make_config('plant').surface_weights}, miss ratio {CALIBRATED_WEIGHTED_MISS_RATIO}"
+    _write_results(Path(args.results) / f"coverage_target_{args.mode}{nbv}.md", tables, what)
 
 
 def _write_results(path: Path, tables, what: str) -> None:

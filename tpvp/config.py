@@ -25,6 +25,7 @@ import numpy as np
 
 from tpvp.errors import ConfigError, InputFileError
 from tpvp.inflation import InflationConfig
+from tpvp.inflation.weights import SurfaceWeightsConfig
 from tpvp.nbv import OccupancyMapConfig
 from tpvp.nbv.blockwise import BlockwiseNbvConfig
 from tpvp.nbv.methods import NBV_METHODS
@@ -163,8 +164,14 @@ class RegistrationConfig:
 # the largest ratio whose mean true coverage reaches it with no case more than one point below,
 # with either warm-up NBV (geometric or prior). Other view spaces (the greenhouse rooms, view-space
 # files) take the smallest, the most cautious: not calibrated there. docs/cli.md, "Asking for a
-# coverage level"; benchmarks/coverage_target_calibration.py.
+# coverage level"; benchmarks/coverage_target_calibration.py. Used on the unweighted planning
+# surface: greenhouse rows, and plants with surface_weights.enabled = False.
 CALIBRATED_MISS_RATIO = {"hemisphere": 0.5, "sphere": 0.25}
+# The same ratio for the weighted planning surface of a plant (PlantConfig.surface_weights, its
+# defaults calibrated with it on seeds 10-12; the ratio applies to the surface's weight): the
+# smallest planning target with mean >= 98.1 % and no case below 97.1 %, the sphere held at
+# r <= 0.25 (what the prior warm-up needs there).
+CALIBRATED_WEIGHTED_MISS_RATIO = {"hemisphere": 0.5, "sphere": 0.25}
 
 
 @dataclass(frozen=True)
@@ -174,8 +181,8 @@ class SelectionConfig:
     coverage_target: the true coverage of today's plant the plan aims for (1.0 = the paper's full
     set cover of the planning surface). planning_miss_ratio: the plan must see
     ``1 - planning_miss_ratio x (1 - coverage_target)`` of the planning surface (None: the
-    calibrated ratio of the view space, :data:`CALIBRATED_MISS_RATIO`; 1: the target applies to the
-    prediction as it is)."""
+    calibrated ratio of the view space, :data:`CALIBRATED_WEIGHTED_MISS_RATIO` on a weighted surface,
+    else :data:`CALIBRATED_MISS_RATIO`; 1: the target applies to the prediction as it is)."""
 
     method: str = "set-cover"
     cover_resolution: float = 0.004
@@ -190,15 +197,18 @@ class SelectionConfig:
         if self.planning_miss_ratio is not None:
             _positive(self, "planning_miss_ratio")
 
-    def planning_target(self, view_space: str) -> float:
+    def planning_target(self, view_space: str, weighted: bool = False) -> float:
         """The fraction of the *predicted planning surface* the selected views must see in
         ``view_space`` for ``coverage_target`` of today's plant (resolved, never stored in
-        ``coverage_target``): ``1 - r x (1 - coverage_target)``."""
+        ``coverage_target``): ``1 - r x (1 - coverage_target)``. ``weighted``: the surface's voxels
+        carry class weights (a plant's ``surface_weights``), r then comes from
+        :data:`CALIBRATED_WEIGHTED_MISS_RATIO`."""
         if self.coverage_target >= 1.0:
             return 1.0
         ratio = self.planning_miss_ratio
         if ratio is None:
-            ratio = CALIBRATED_MISS_RATIO.get(view_space, min(CALIBRATED_MISS_RATIO.values()))
+            table = CALIBRATED_WEIGHTED_MISS_RATIO if weighted else CALIBRATED_MISS_RATIO
+            ratio = table.get(view_space, min(table.values()))
         target = 1.0 - ratio * (1.0 - self.coverage_target)
         if target <= 0:
             raise ConfigError(f"selection.planning_miss_ratio={ratio!r} with coverage_target="
@@ -227,6 +237,8 @@ class PlantConfig:
     registration: RegistrationConfig = field(default_factory=RegistrationConfig)
     inflation: InflationConfig = field(default_factory=InflationConfig)
     selection: SelectionConfig = field(default_factory=SelectionConfig)
+    # Class weights of the planning surface for a coverage target below 1 (ignored at 1.0).
+    surface_weights: SurfaceWeightsConfig = field(default_factory=SurfaceWeightsConfig)
     path: TspConfig = field(default_factory=TspConfig)
     gmc: GmcConfig = field(default_factory=GmcConfig)
 

@@ -2,8 +2,9 @@
 planning surface, the plan's views, path and true coverage, beside the exact optimum with perfect
 knowledge of today's plant for the same true-coverage target.
 
-The warm-up and registration are computed once and shared by every target (they do not depend on
-it); each target then costs one selection (exact partial set cover) and one path.
+The warm-up, registration and planning surface (inflation, visibility) are computed once and
+shared by every target (they do not depend on it); each target then costs one selection (exact
+partial set cover) and one path.
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ import pandas as pd
 from tpvp.config import PlantConfig, with_overrides
 from tpvp.errors import ConfigError
 from tpvp.experiments.baselines import optimum
-from tpvp.experiments.single_plant import Scene, run_case, transfer
+from tpvp.experiments.single_plant import Scene, planning_surface, run_case, transfer
 from tpvp.io import atomic_write_text
 from tpvp.io.publish import staged_folder
 from tpvp.viz.experiments import plot_frontier
@@ -35,11 +36,12 @@ def coverage_frontier(scene: Scene, config: PlantConfig, targets=DEFAULT_TARGETS
     if not values or values[0] <= 0 or values[-1] > 1:
         raise ConfigError(f"coverage targets must be fractions in (0, 1], got {list(targets)!r}")
     shared = transferred or transfer(scene, config)
+    surface = planning_surface(scene, config, shared)
     best = optimum(scene, config, targets=tuple(values)).set_index("target")
     rows = []
     for target in values:
         result = run_case(scene, with_overrides(config, {"selection.coverage_target": target}),
-                          transferred=shared)
+                          transferred=shared, surface=surface)
         limit = best.loc[target]
         rows.append({"target": target, "views": result.n_views, "coverage": result.coverage,
                      "path_length_m": result.path_length, "selection_optimal": bool(result.selection.optimal),

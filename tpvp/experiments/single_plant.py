@@ -16,6 +16,7 @@ from scipy import sparse
 
 from tpvp.config import PlantConfig
 from tpvp.inflation import inflate
+from tpvp.inflation.weights import surface_area, surface_classes, surface_weights
 from tpvp.nbv.warm_up import warm_up
 from tpvp.path.local import predicted_size
 from tpvp.path.route import path_through
@@ -139,44 +140,86 @@ def planning_visibility(scene: Scene, planning_cloud, resolution: float):
 
 
 def run_case(scene: Scene, config: PlantConfig = PlantConfig(), progress=None,
-             transferred: Transfer | None = None) -> CaseResult:
+             transferred: Transfer | None = None, surface: PlanningSurface | None = None) -> CaseResult:
     """Warm-up, transfer, plan and execute one case; ``progress(stage)`` is called per stage.
     ``transferred``: the :func:`transfer` of this scene and configuration when already computed
-    (methods that differ only after registration share it)."""
-    result = plan_case(scene, config, progress, transferred)
+    (methods that differ only after registration share it); ``surface``: likewise its
+    :func:`planning_surface` (plans that differ only in the selection share it)."""
+    result = plan_case(scene, config, progress, transferred, surface)
     executed, planned = result.executed_views, result.planned_views
     return replace(result, coverage=coverage_ratio(covered_voxels(scene.truth_visibility, executed + planned),
                                                    scene.oracle),
                    coverage_warm_up=coverage_ratio(covered_voxels(scene.truth_visibility, executed), scene.oracle))
 
 
-def plan_case(scene, config: PlantConfig = PlantConfig(), progress=None,
-              transferred: Transfer | None = None) -> CaseResult:
-    """Warm-up, transfer and plan, without executing the plan: the coverages are NaN (a real
-    session has no ground truth to measure them on)."""
-    say = progress or (lambda stage: None)
-    space = scene.view_space
-    centre = np.zeros(3)
-    transferred = transferred or transfer(scene, config, progress)
-    nbv, executed, coarse, alignment = (transferred.nbv, transferred.executed, transferred.coarse,
-                                        transferred.alignment)
-    timings = dict(transferred.timings)
-    warnings = list(transferred.warnings)
+@dataclass(frozen=True, eq=False)
+class PlanningSurface:
+    """The planning surface of a case and what the candidate views see of it: the inflation's
+    result (P~ u Q u I), the planning grid, the (views x planning voxels) visibility, the class and
+    the area of each planning voxel (:mod:`tpvp.inflation.weights`) and the stage timings."""
 
+    inflated: object  # tpvp.inflation.InflationResult
+    grid: object  # tpvp.scene.grid.OccupancyGrid
+    visibility: object
+    classes: np.ndarray
+    area: np.ndarray
+    timings: dict
+
+
+def planning_surface(scene: Scene, config: PlantConfig, transferred: Transfer, progress=None) -> PlanningSurface:
+    """Inflation, the planning grid with its voxel classes, and visibility (ray casting)."""
+    say = progress or (lambda stage: None)
+    timings = {}
+    centre = np.zeros(3)
     t = time.perf_counter()
     say("inflation")
-    inflated = inflate(alignment.warped, coarse, centre, predicted_size(coarse, centre), config.inflation)
+    coarse, warped = transferred.coarse, transferred.alignment.warped
+    inflated = inflate(warped, coarse, centre, predicted_size(coarse, centre), config.inflation)
     timings["inflation"] = time.perf_counter() - t
 
     t = time.perf_counter()
     say("visibility")
-    planning_grid, visibility = planning_visibility(scene, inflated.planning, config.selection.cover_resolution)
+    resolution = config.selection.cover_resolution
+    grid, visibility = planning_visibility(scene, inflated.planning, resolution)
+    classes = surface_classes(grid.keys, resolution, warped, coarse, config.surface_weights.near_voxels * resolution)
+    area = surface_area(grid.keys, resolution, inflated.planning)
     timings["visibility"] = time.perf_counter() - t
+    return PlanningSurface(inflated, grid, visibility, classes, area, timings)
+
+
+def selection_problem(scene: Scene, config: PlantConfig, transferred: Transfer,
+                      surface: PlanningSurface) -> SelectionProblem:
+    """The view selection on ``surface``: the executed views, the planning target of the coverage
+    target and, below a target of 1, the voxels' class weights (``config.surface_weights``)."""
+    selection = config.selection
+    weights = None
+    if selection.coverage_target < 1.0:
+        weights = surface_weights(surface.classes, config.surface_weights, surface.area)
+    return SelectionProblem(surface.visibility, tuple(transferred.executed), scene.view_space,
+                            surface.grid.centres, selection.planning_target(config.view_space, weights is not None),
+                            voxel_weights=weights, nbv=transferred.nbv)
+
+
+def plan_case(scene, config: PlantConfig = PlantConfig(), progress=None,
+              transferred: Transfer | None = None, surface: PlanningSurface | None = None) -> CaseResult:
+    """Warm-up, transfer and plan, without executing the plan: the coverages are NaN (a real
+    session has no ground truth to measure them on). ``surface``: the :func:`planning_surface` of
+    this scene, transfer and configuration when already computed (plans that differ only in the
+    selection share it)."""
+    say = progress or (lambda stage: None)
+    space = scene.view_space
+    centre = np.zeros(3)
+    transferred = transferred or transfer(scene, config, progress)
+    executed, coarse, alignment = transferred.executed, transferred.coarse, transferred.alignment
+    timings = dict(transferred.timings)
+    warnings = list(transferred.warnings)
+
+    surface = surface or planning_surface(scene, config, transferred, progress)
+    timings.update(surface.timings)
 
     t = time.perf_counter()
     say("view selection")
-    problem = SelectionProblem(visibility, tuple(executed), space, planning_grid.centres,
-                               config.selection.planning_target(config.view_space), nbv=nbv)
+    problem = selection_problem(scene, config, transferred, surface)
     selection = select_views(problem, config.selection)
     timings["selection"] = time.perf_counter() - t
 
@@ -192,7 +235,8 @@ def plan_case(scene, config: PlantConfig = PlantConfig(), progress=None,
         chamfer_before=alignment.chamfer_before, chamfer_after=alignment.chamfer_after,
         selection=selection, tsp=tsp, timings=timings,
         clouds={"coarse": np.unique(coarse, axis=0), "previous": scene.previous,
-                "warped": alignment.warped, "inflation": inflated.inflation, "planning": inflated.planning},
+                "warped": alignment.warped, "inflation": surface.inflated.inflation,
+                "planning": surface.inflated.planning},
         obstacle=(centre, radius), warnings=warnings, planning_target=problem.planning_target,
     )
 
