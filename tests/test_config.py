@@ -116,16 +116,11 @@ def test_configs_are_frozen():
 def test_planning_target_from_the_asked_coverage():
     """The asked true coverage maps to the planning surface through the calibrated miss ratio of the
     view space (the smallest for other view spaces); 1.0 stays the full set cover."""
-    from tpvp.config import CALIBRATED_MISS_RATIO, CALIBRATED_WEIGHTED_MISS_RATIO, SelectionConfig
+    from tpvp.config import CALIBRATED_MISS_RATIO, SelectionConfig
 
     asked = SelectionConfig(coverage_target=0.98)
     for space, ratio in CALIBRATED_MISS_RATIO.items():
         assert asked.planning_target(space) == pytest.approx(1 - ratio * 0.02)
-    for space, ratio in CALIBRATED_WEIGHTED_MISS_RATIO.items():
-        assert asked.planning_target(space, weighted=True) == pytest.approx(1 - ratio * 0.02)
-    assert asked.planning_target("tammes:40", weighted=True) == pytest.approx(
-        1 - min(CALIBRATED_WEIGHTED_MISS_RATIO.values()) * 0.02)
-    assert SelectionConfig(coverage_target=0.98, planning_miss_ratio=1.0).planning_target("sphere", True) == pytest.approx(0.98)
     assert asked.planning_target("tammes:40") == pytest.approx(1 - min(CALIBRATED_MISS_RATIO.values()) * 0.02)
     assert SelectionConfig(coverage_target=0.98, planning_miss_ratio=1.0).planning_target("sphere") == pytest.approx(0.98)
     assert SelectionConfig().planning_target("hemisphere") == 1.0

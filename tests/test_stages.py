@@ -6,7 +6,7 @@ import json
 import numpy as np
 import pytest
 
-from tpvp.config import CALIBRATED_WEIGHTED_MISS_RATIO, make_config
+from tpvp.config import CALIBRATED_MISS_RATIO, make_config
 from tpvp.errors import ConfigError, InputFileError
 from tpvp.experiments.outputs import write_case_outputs
 from tpvp.experiments.single_plant import build_scene, run_case
@@ -100,8 +100,8 @@ def test_a_dummy_selection_method_sees_the_problem_and_its_choice_is_executed(sc
                                                        "selection.coverage_target": 0.9}))
     finally:
         SELECTION_METHODS.unregister(name)
-    # the problem carries the planning target the asked 0.9 maps to in the hemisphere (weighted surface)
-    assert seen["target"] == pytest.approx(1 - CALIBRATED_WEIGHTED_MISS_RATIO["hemisphere"] * 0.1) == result.planning_target
+    # the problem carries the planning target the asked 0.9 maps to in the hemisphere
+    assert seen["target"] == pytest.approx(1 - CALIBRATED_MISS_RATIO["hemisphere"] * 0.1) == result.planning_target
     assert seen["shape"][0] == 32 and seen["occupancy"]
     assert sorted(result.executed_views + result.planned_views) == list(range(32))
 

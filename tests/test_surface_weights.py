@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy import sparse
 
-from tpvp.config import CALIBRATED_MISS_RATIO, CALIBRATED_WEIGHTED_MISS_RATIO, PlantConfig, SelectionConfig, make_config
+from tpvp.config import CALIBRATED_MISS_RATIO, PlantConfig, SelectionConfig, make_config
 from tpvp.errors import ConfigError
 from tpvp.experiments.single_plant import PlanningSurface, selection_problem
 from tpvp.inflation.weights import (SURFACE_CLASSES, SurfaceWeightsConfig, surface_area, surface_classes,
@@ -59,7 +59,7 @@ def test_surface_classes_hand_built():
     assert surface_classes(keys, r, warped, coarse, 0.015).tolist() == [0, 1, 2, 3]
     assert surface_classes(keys, r, warped, coarse, 0.005).tolist() == [0, 2, 2, 3]  # 1 cm > 0.5 cm: far
     assert surface_classes(keys, r, np.zeros((0, 3)), coarse, 0.015).tolist() == [0, 3, 3, 3]
-    weights = surface_weights([0, 1, 2, 3], SurfaceWeightsConfig(observed=0.25, transferred_near=1.0,
+    weights = surface_weights([0, 1, 2, 3], SurfaceWeightsConfig(enabled=True, observed=0.25, transferred_near=1.0,
                                                                  transferred_far=2.0, inflation=0.5))
     assert weights.tolist() == [0.25, 1.0, 2.0, 0.5]
     assert surface_weights([0, 3], SurfaceWeightsConfig(enabled=False)) is None
@@ -84,7 +84,7 @@ def test_surface_area_equals_brute_force(seed):
 
 
 def test_area_multiplies_the_class_weights():
-    config = SurfaceWeightsConfig(area=True, observed=1.0, transferred_near=0.5)
+    config = SurfaceWeightsConfig(enabled=True, area=True, observed=1.0, transferred_near=0.5)
     assert surface_weights([0, 1, 1], config, np.array([3, 1, 4])).tolist() == [3.0, 0.5, 2.0]
     with pytest.raises(ConfigError, match="area"):
         surface_weights([0, 1], config)
@@ -107,7 +107,7 @@ def test_bad_weight_inputs():
     with pytest.raises(ConfigError, match="surface_weights.observed"):
         make_config("plant", {"surface_weights.observed": 0})
     with pytest.raises(ConfigError, match="0..3"):
-        surface_weights([0, 4], SurfaceWeightsConfig())
+        surface_weights([0, 4], SurfaceWeightsConfig(enabled=True))
     with pytest.raises(ConfigError, match="near"):
         surface_classes([[0, 0, 0]], 0.004, np.zeros((1, 3)), np.zeros((1, 3)), 0.0)
     with pytest.raises(ConfigError, match="SurfaceWeightsConfig"):
@@ -133,7 +133,7 @@ def test_weighted_target_of_the_selection_equals_exhaustive_search(seed):
     a = rng.random((9, 30)) < 0.2
     a[:, :3] = False  # uncoverable voxels carry weight that the target must ignore
     classes = rng.integers(0, 4, 30)
-    weights = surface_weights(classes, SurfaceWeightsConfig(observed=0.25, transferred_far=2.0, inflation=0.5))
+    weights = surface_weights(classes, SurfaceWeightsConfig(enabled=True, observed=0.25, transferred_far=2.0, inflation=0.5))
     executed = (1,)
     config = SelectionConfig(coverage_target=0.9)
     for target in (0.7, 0.9, 0.97):
@@ -149,7 +149,7 @@ def test_weighted_target_of_the_selection_equals_exhaustive_search(seed):
 
 def test_selection_problem_weights_only_below_a_target_of_one():
     """At the paper's target 1.0 the problem carries no weights (the full set cover is unchanged);
-    below it the class weights and the weighted miss ratio; unweighted with weights disabled."""
+    below it, with the weights enabled, the class weights; unweighted by default."""
     classes = np.array([0, 1, 2, 3, 0], dtype=np.int8)
     area = np.array([1, 2, 3, 4, 1])
     surface = PlanningSurface(None, SimpleNamespace(centres=np.zeros((5, 3))), sparse.csr_matrix((4, 5)), classes, area,
@@ -158,12 +158,13 @@ def test_selection_problem_weights_only_below_a_target_of_one():
     scene = SimpleNamespace(view_space=None)
     full = selection_problem(scene, PlantConfig(), transferred, surface)
     assert full.voxel_weights is None and full.planning_target == 1.0
-    asked = make_config("plant", {"selection.coverage_target": 0.98, "view_space": "sphere"})
+    asked = make_config("plant", {"selection.coverage_target": 0.98, "view_space": "sphere",
+                                  "surface_weights.enabled": True})
     weighted = selection_problem(scene, asked, transferred, surface)
     expected = asked.surface_weights.class_weights[classes] * (area if asked.surface_weights.area else 1)
     assert np.array_equal(weighted.voxel_weights, expected)
-    assert weighted.planning_target == pytest.approx(1 - CALIBRATED_WEIGHTED_MISS_RATIO["sphere"] * 0.02)
-    plain = selection_problem(scene, make_config("plant", {"selection.coverage_target": 0.98, "view_space": "sphere",
-                                                           "surface_weights.enabled": False}), transferred, surface)
+    assert weighted.planning_target == pytest.approx(1 - CALIBRATED_MISS_RATIO["sphere"] * 0.02)
+    plain = selection_problem(scene, make_config("plant", {"selection.coverage_target": 0.98, "view_space": "sphere"}),
+                              transferred, surface)
     assert plain.voxel_weights is None
     assert plain.planning_target == pytest.approx(1 - CALIBRATED_MISS_RATIO["sphere"] * 0.02)

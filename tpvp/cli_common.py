@@ -15,8 +15,7 @@ from tpvp.viewspace import get_view_space, view_space_choices
 # One rule for plants and rows (selection.coverage_target, SelectionConfig.planning_target).
 COVERAGE_TARGET_HELP = ("true coverage of today's plants to aim for, e.g. 0.98: the fewest views that see "
                         "1 - r x (1 - target) of the predicted planning surface (exact partial set cover; r per "
-                        "view space, selection.planning_miss_ratio: 0.5 hemisphere, 0.25 sphere and rooms; a "
-                        "plant's voxels weighted by how sure the prediction is of them, surface_weights); "
+                        "view space, selection.planning_miss_ratio: 0.5 hemisphere, 0.25 sphere and rooms); "
                         "1.0 = the paper's full set cover (default: the configuration's, 1.0)")
 
 def print_warnings(warnings) -> None:

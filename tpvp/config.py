@@ -164,14 +164,9 @@ class RegistrationConfig:
 # the largest ratio whose mean true coverage reaches it with no case more than one point below,
 # with either warm-up NBV (geometric or prior). Other view spaces (the greenhouse rooms, view-space
 # files) take the smallest, the most cautious: not calibrated there. docs/cli.md, "Asking for a
-# coverage level"; benchmarks/coverage_target_calibration.py. Used on the unweighted planning
-# surface: greenhouse rows, and plants with surface_weights.enabled = False.
+# coverage level"; benchmarks/coverage_target_calibration.py. The weighted surface of a plant
+# (PlantConfig.surface_weights, off by default) was calibrated with the same ratios.
 CALIBRATED_MISS_RATIO = {"hemisphere": 0.5, "sphere": 0.25}
-# The same ratio for the weighted planning surface of a plant (PlantConfig.surface_weights, its
-# defaults calibrated with it on seeds 10-12; the ratio applies to the surface's weight): the
-# smallest planning target with mean >= 98.1 % and no case below 97.1 %, the sphere held at
-# r <= 0.25 (what the prior warm-up needs there).
-CALIBRATED_WEIGHTED_MISS_RATIO = {"hemisphere": 0.5, "sphere": 0.25}
 
 
 @dataclass(frozen=True)
@@ -181,8 +176,8 @@ class SelectionConfig:
     coverage_target: the true coverage of today's plant the plan aims for (1.0 = the paper's full
     set cover of the planning surface). planning_miss_ratio: the plan must see
     ``1 - planning_miss_ratio x (1 - coverage_target)`` of the planning surface (None: the
-    calibrated ratio of the view space, :data:`CALIBRATED_WEIGHTED_MISS_RATIO` on a weighted surface,
-    else :data:`CALIBRATED_MISS_RATIO`; 1: the target applies to the prediction as it is)."""
+    calibrated ratio of the view space, :data:`CALIBRATED_MISS_RATIO`; 1: the target applies to the
+    prediction as it is)."""
 
     method: str = "set-cover"
     cover_resolution: float = 0.004
@@ -197,18 +192,16 @@ class SelectionConfig:
         if self.planning_miss_ratio is not None:
             _positive(self, "planning_miss_ratio")
 
-    def planning_target(self, view_space: str, weighted: bool = False) -> float:
+    def planning_target(self, view_space: str) -> float:
         """The fraction of the *predicted planning surface* the selected views must see in
         ``view_space`` for ``coverage_target`` of today's plant (resolved, never stored in
-        ``coverage_target``): ``1 - r x (1 - coverage_target)``. ``weighted``: the surface's voxels
-        carry class weights (a plant's ``surface_weights``), r then comes from
-        :data:`CALIBRATED_WEIGHTED_MISS_RATIO`."""
+        ``coverage_target``): ``1 - r x (1 - coverage_target)``, of its voxels or of their weight
+        (a plant's ``surface_weights``)."""
         if self.coverage_target >= 1.0:
             return 1.0
         ratio = self.planning_miss_ratio
         if ratio is None:
-            table = CALIBRATED_WEIGHTED_MISS_RATIO if weighted else CALIBRATED_MISS_RATIO
-            ratio = table.get(view_space, min(table.values()))
+            ratio = CALIBRATED_MISS_RATIO.get(view_space, min(CALIBRATED_MISS_RATIO.values()))
         target = 1.0 - ratio * (1.0 - self.coverage_target)
         if target <= 0:
             raise ConfigError(f"selection.planning_miss_ratio={ratio!r} with coverage_target="

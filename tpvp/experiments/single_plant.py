@@ -161,8 +161,8 @@ class PlanningSurface:
     inflated: object  # tpvp.inflation.InflationResult
     grid: object  # tpvp.scene.grid.OccupancyGrid
     visibility: object
-    classes: np.ndarray
-    area: np.ndarray
+    classes: np.ndarray | None  # None unless config.surface_weights.enabled
+    area: np.ndarray | None
     timings: dict
 
 
@@ -181,8 +181,10 @@ def planning_surface(scene: Scene, config: PlantConfig, transferred: Transfer, p
     say("visibility")
     resolution = config.selection.cover_resolution
     grid, visibility = planning_visibility(scene, inflated.planning, resolution)
-    classes = surface_classes(grid.keys, resolution, warped, coarse, config.surface_weights.near_voxels * resolution)
-    area = surface_area(grid.keys, resolution, inflated.planning)
+    classes = area = None  # only a weighted coverage target reads them
+    if config.surface_weights.enabled:
+        classes = surface_classes(grid.keys, resolution, warped, coarse, config.surface_weights.near_voxels * resolution)
+        area = surface_area(grid.keys, resolution, inflated.planning) if config.surface_weights.area else None
     timings["visibility"] = time.perf_counter() - t
     return PlanningSurface(inflated, grid, visibility, classes, area, timings)
 
@@ -193,10 +195,10 @@ def selection_problem(scene: Scene, config: PlantConfig, transferred: Transfer,
     target and, below a target of 1, the voxels' class weights (``config.surface_weights``)."""
     selection = config.selection
     weights = None
-    if selection.coverage_target < 1.0:
+    if selection.coverage_target < 1.0 and config.surface_weights.enabled:
         weights = surface_weights(surface.classes, config.surface_weights, surface.area)
     return SelectionProblem(surface.visibility, tuple(transferred.executed), scene.view_space,
-                            surface.grid.centres, selection.planning_target(config.view_space, weights is not None),
+                            surface.grid.centres, selection.planning_target(config.view_space),
                             voxel_weights=weights, nbv=transferred.nbv)
 
 

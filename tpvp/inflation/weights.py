@@ -29,12 +29,11 @@ SURFACE_CLASSES = ("observed", "transferred near", "transferred far", "inflation
 @dataclass(frozen=True)
 class SurfaceWeightsConfig:
     """Per-class weights of the planning surface for a coverage target below 1 (the partial cover
-    must see ``planning target x`` the total weight). Defaults: calibrated on generated seeds
-    10-12 (``benchmarks/coverage_target_calibration.py --mode calibrate``), with the planning
-    target's miss ratio :data:`tpvp.config.CALIBRATED_WEIGHTED_MISS_RATIO`.
+    must see ``planning target x`` the total weight). Off by default; the class weights are those
+    calibrated on generated seeds 10-12 (``benchmarks/coverage_target_calibration.py --mode
+    calibrate``) with the planning target's miss ratio :data:`tpvp.config.CALIBRATED_MISS_RATIO`.
 
-    enabled: False plans on the unweighted surface (every voxel counts 1; the miss ratio of
-    :data:`tpvp.config.CALIBRATED_MISS_RATIO`). near_voxels: a transferred voxel whose centre lies
+    enabled: True weighs the planning voxels (False: every voxel counts 1). near_voxels: a transferred voxel whose centre lies
     within this many planning voxels (``selection.cover_resolution``) of Q is "near".
     observed, transferred_near, transferred_far, inflation: the class weights (> 0; only their
     ratios matter). area: also weigh each voxel by the surface it stands for, the number of
@@ -45,9 +44,9 @@ class SurfaceWeightsConfig:
     # Calibrated on seeds 10-12 (benchmarks/results/coverage_target_calibrate.md and docs/results.md,
     # "Coverage target"): what was observed counts 1, the transferred prediction 0.25 (it is what may
     # be wrong today), the growth allowance 0.1; "near" within one planning voxel of Q. Weighing by
-    # area did not help there. On the evaluation seeds it saves 0.05-0.1 views per plan against the
-    # unweighted surface but leaves one case per view space below 97 % for a 98 % request.
-    enabled: bool = True
+    # area did not help there. Off: on the evaluation seeds it saved 0.05-0.1 views per plan against
+    # the unweighted surface but left one case per view space below 97 % for a 98 % request.
+    enabled: bool = False
     area: bool = False
     near_voxels: float = 1.0
     observed: float = 1.0
