@@ -343,6 +343,13 @@ def _(tmp, capsys):
                    entry=data_cli.main)
 
 
+@row("reference-with-dataset", 2, "tpvp greenhouse: error: --reference applies to generated rows",
+     "are used as they are")
+def _(tmp, capsys):
+    return run_cli(["greenhouse", "--dataset", tmp / "data", "--reference", "complete", "--output", tmp / "out"],
+                   capsys)
+
+
 # --------------------------------------------------------------------------------------------------
 
 
