@@ -33,20 +33,17 @@ Usage:
 from __future__ import annotations
 
 import argparse
-import shlex
-import sys
 import time
 from dataclasses import replace
 from concurrent.futures import ProcessPoolExecutor
-from datetime import datetime, timezone
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
 from tpvp.config import CALIBRATED_MISS_RATIO, make_config, with_overrides
-from tpvp.io import atomic_write_text
 from tpvp.experiments import plants
+from results_file import write_results
 
 RESULTS = Path(__file__).resolve().parent / "results"
 CALIBRATION_TARGETS = (0.98, 0.985, 0.9875, 0.99, 0.9925, 0.995, 0.99625, 0.9975, 0.99875, 0.9995)
@@ -93,10 +90,6 @@ def _weights_label(weights) -> str:
         + f" @{weights['near_voxels']:g}" + (" area" if weights["area"] else "")
 
 
-def _base_config(overrides):
-    return make_config("plant", overrides)
-
-
 def _calibrate_case(case, targets, overrides) -> list[dict]:
     from tpvp.experiments.baselines import optimum
     from tpvp.experiments.single_plant import build_scene, planning_surface, selection_problem, transfer
@@ -106,7 +99,7 @@ def _calibrate_case(case, targets, overrides) -> list[dict]:
     from tpvp.visibility import coverage_ratio, covered_voxels
 
     compile_kernels()
-    config = case.config(_base_config(overrides))
+    config = case.config(make_config("plant", overrides))
     scene = build_scene(*case.instance.load(), config)
     shared = transfer(scene, config)
     surface = planning_surface(scene, config, shared)
@@ -143,7 +136,7 @@ def _evaluate_case(case, targets, overrides) -> list[dict]:
     from tpvp.metrics import chamfer_distance
 
     compile_kernels()
-    config = case.config(_base_config(overrides))
+    config = case.config(make_config("plant", overrides))
     scene = build_scene(*case.instance.load(), config)
     shared = transfer(scene, config)
     chamfer_mm = 1e3 * chamfer_distance(shared.alignment.warped, scene.current)
@@ -267,21 +260,8 @@ def main() -> None:
                  + ", ".join(_weights_label(w) for w in weight_grid()) + ") and the planning target per view "
                  "space, i.e. the miss ratio (1 - planning target) / (1 - 0.98)")
     else:
-        what += f"; rule: {_base_config(overrides).surface_weights}, miss ratio {CALIBRATED_MISS_RATIO}"
-    _write_results(Path(args.results) / f"coverage_target_{args.mode}{nbv}.md", tables, what)
-
-
-def _write_results(path: Path, tables, what: str) -> None:
-    """The tables as Markdown with the command that made them (through the library's atomic writer)."""
-    command = "python " + " ".join(shlex.quote(a) for a in [Path(sys.argv[0]).as_posix(), *sys.argv[1:]])
-    text = [f"# {path.stem}", "", f"Made by `{command}` on {datetime.now(timezone.utc):%Y-%m-%d} ({what}).", ""]
-    for title, table in tables:
-        rows = [[f"{v:.4g}" if isinstance(v, (float, np.floating)) else str(v) for v in row]
-                for row in table.itertuples(index=False)]
-        text += [f"## {title}", "", "| " + " | ".join(map(str, table.columns)) + " |",
-                 "|" + "---|" * len(table.columns), *("| " + " | ".join(row) + " |" for row in rows), ""]
-    atomic_write_text(path, "\n".join(text))
-    print(f"wrote {path}")
+        what += f"; rule: {make_config('plant', overrides).surface_weights}, miss ratio {CALIBRATED_MISS_RATIO}"
+    write_results(Path(args.results) / f"coverage_target_{args.mode}{nbv}.md", tables, what)
 
 
 if __name__ == "__main__":

@@ -21,8 +21,6 @@ Writes benchmarks/results/row_view_count.md (with this command) and prints the t
 from __future__ import annotations
 
 import argparse
-import shlex
-import sys
 import time
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import replace
@@ -40,6 +38,7 @@ from tpvp.metrics.views import forced_views, views_per_voxel
 from tpvp.scene import voxels
 from tpvp.setcover.methods import select_views
 from tpvp.viewspace.priors import candidate_views
+from results_file import write_results
 
 RESULTS = Path(__file__).resolve().parent / "results"
 
@@ -142,18 +141,9 @@ def main() -> None:
     pd.set_option("display.width", 250)
     print(table.round(2).to_string(index=False))
     print(f"{len(jobs)} cases in {time.perf_counter() - started:.0f} s")
-    _write(Path(args.output), table, raw, len(jobs))
-
-
-def _write(path: Path, table: pd.DataFrame, raw: pd.DataFrame, cases: int) -> None:
-    command = "python " + " ".join(shlex.quote(a) for a in [Path(sys.argv[0]).as_posix(), *sys.argv[1:]])
-    lines = [f"# {path.stem}", "", f"Made by `{command}` ({cases} cases; means over the cases).", "",
-             "| " + " | ".join(table.columns) + " |", "|" + "---|" * len(table.columns)]
-    lines += ["| " + " | ".join(f"{v:.4g}" if isinstance(v, (float, np.floating)) else str(v) for v in row) + " |"
-              for row in table.itertuples(index=False)]
-    atomic_write_text(path, "\n".join(lines) + "\n")
-    atomic_write_text(path.with_suffix(".csv"), raw.to_csv(index=False))
-    print(f"wrote {path}")
+    write_results(args.output, [("set-cover instance, means over the cases", table)],
+                  f"{len(jobs)} cases, {time.perf_counter() - started:.0f} s on {args.workers} workers")
+    atomic_write_text(Path(args.output).with_suffix(".csv"), raw.to_csv(index=False))
 
 
 if __name__ == "__main__":

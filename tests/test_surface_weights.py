@@ -1,12 +1,12 @@
 """Class weights of the planning surface (tpvp.inflation.weights) against brute force, and the
 weighted coverage target of the set-cover selection against exhaustive search."""
 
-import itertools
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
 from scipy import sparse
+from test_partial_cover import brute_fewest
 
 from tpvp.config import CALIBRATED_MISS_RATIO, PlantConfig, SelectionConfig, make_config
 from tpvp.errors import ConfigError
@@ -114,17 +114,6 @@ def test_bad_weight_inputs():
         surface_weights([0], SelectionConfig())
 
 
-def brute_fewest_weighted(a, required, executed, weights):
-    views = [v for v in range(a.shape[0]) if v not in executed]
-    base = a[list(executed)].any(axis=0)
-    for size in range(len(views) + 1):
-        for combo in itertools.combinations(views, size):
-            union = base | (a[list(combo)].any(axis=0) if combo else False)
-            if weights[union].sum() >= required - 1e-9:
-                return size
-    return None
-
-
 @pytest.mark.parametrize("seed", range(4))
 def test_weighted_target_of_the_selection_equals_exhaustive_search(seed):
     """set_cover with voxel weights below a target of 1: the fewest views that see the target's
@@ -143,7 +132,7 @@ def test_weighted_target_of_the_selection_equals_exhaustive_search(seed):
         required = target * weights[coverable].sum()
         union = a[list(executed) + list(selection.selected)].any(axis=0)
         assert weights[union].sum() >= required - 1e-9
-        assert len(selection.selected) == brute_fewest_weighted(a, required, executed, weights) and selection.optimal
+        assert len(selection.selected) == brute_fewest(a, required, executed, weights) and selection.optimal
         assert 1 not in selection.selected
 
 

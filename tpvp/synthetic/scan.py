@@ -25,7 +25,7 @@ from tpvp.scene import voxels
 from tpvp.scene.grid import build_grid
 from tpvp.sensor.camera import Intrinsics
 from tpvp.sensor.sensor import ROW_RANGE, SensorConfig
-from tpvp.visibility import covered_voxels, safe_visibility
+from tpvp.visibility import safe_visibility
 
 REFERENCES = ("complete", "candidates", "handheld")
 
@@ -100,12 +100,18 @@ def handheld_scan(points, room, capture: HandheldCapture = HandheldCapture()) ->
     """Boolean mask of the ``points`` (a row in ``room``'s frame) that the emulated phone capture
     keeps: their ``capture.resolution`` voxel is seen by at least ``capture.min_frames`` keyframes
     of :func:`handheld_trajectory` (one ray per depth pixel)."""
-    points = checked_cloud(points, "row")
-    grid = build_grid(voxels.voxelise(points, capture.resolution), capture.resolution)
     positions, look_ats = handheld_trajectory(room, capture)
     sensor = SensorConfig(model="pixel", max_range=capture.max_range, intrinsics=capture.intrinsics)
-    frames = np.asarray(safe_visibility(grid, positions, look_ats, sensor).sum(axis=0)).ravel()
-    return frames[grid.ids_of(voxels.voxel_keys(points, capture.resolution))] >= capture.min_frames
+    return _seen_by(points, capture.resolution, positions, look_ats, sensor, capture.min_frames)
+
+
+def _seen_by(points, resolution: float, positions, look_ats, sensor: SensorConfig, views: int) -> np.ndarray:
+    """Boolean mask of the ``points`` whose ``resolution`` voxel at least ``views`` of the views
+    (``positions``, ``look_ats``) observe through ``sensor``."""
+    points = checked_cloud(points, "row")
+    grid = build_grid(voxels.voxelise(points, resolution), resolution)
+    seeing = np.asarray(safe_visibility(grid, positions, look_ats, sensor).sum(axis=0)).ravel()
+    return seeing[grid.ids_of(voxels.voxel_keys(points, resolution))] >= views
 
 
 SCAN_OFFSETS = ((0.0, 0.0), (1.0, 0.0), (-1.0, 0.0), (0.0, 1.0), (0.0, -1.0))  # (along, up) x offset
@@ -117,8 +123,6 @@ def candidate_scan(points, room, resolution: float = 0.02, offset: float = 0.3,
     observe with the rows' reference sensor: from every candidate position, looking straight across
     the row and ``offset`` metres to the left, right, up and down of that point on the row's
     mid-plane. The planners choose from the same positions (the earlier default reference)."""
-    points = checked_cloud(points, "row")
-    grid = build_grid(voxels.voxelise(points, resolution), resolution)
     box = room.plant_box
     local = box.to_local(room.candidate_positions)
     positions, look_ats = [], []
@@ -129,9 +133,8 @@ def candidate_scan(points, room, resolution: float = 0.02, offset: float = 0.3,
         target[:, 2] += up * offset
         positions.append(room.candidate_positions)
         look_ats.append(box.to_world(target))
-    visibility = safe_visibility(grid, np.concatenate(positions), np.concatenate(look_ats), SensorConfig(max_range=max_range))
-    seen = covered_voxels(visibility, np.arange(visibility.shape[0]))
-    return np.isin(grid.ids_of(voxels.voxel_keys(points, resolution)), seen)
+    return _seen_by(points, resolution, np.concatenate(positions), np.concatenate(look_ats),
+                    SensorConfig(max_range=max_range), 1)
 
 
 def reference_points(points, room, reference: str = "handheld") -> np.ndarray:
