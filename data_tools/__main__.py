@@ -13,4 +13,4 @@ def _load_main():
 
 
 if __name__ == "__main__":
-    sys.exit(run_checked("data_tools", _load_main))
+    sys.exit(run_checked("data_tools", _load_main, exiting=True))

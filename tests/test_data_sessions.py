@@ -121,7 +121,7 @@ def test_interruption_at_the_commit_is_held_back_until_the_dataset_is_whole(stan
     capsys.readouterr()
     saved = signal.signal(signal.SIGINT, signal.default_int_handler)  # Ctrl-C as in a terminal
     try:
-        with faults.inject("interrupt", steps - 1):  # the first rename of the commit
+        with faults.inject("interrupt", steps - 2):  # the first rename of the commit
             assert cli.main(args) == 130
     finally:
         signal.signal(signal.SIGINT, saved)

@@ -9,6 +9,7 @@ test here, or a test without a row, fails :func:`test_every_row_of_the_table_has
 from __future__ import annotations
 
 import gzip
+import json
 import os
 import re
 import signal
@@ -51,8 +52,8 @@ def run_cli(argv, capsys, entry=main):
     return code, out, err
 
 
-def run_subprocess(argv, cwd):
-    env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+def run_subprocess(argv, cwd, env=None):
+    env = dict(os.environ, **(env or {}), PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
     result = subprocess.run([sys.executable, "-m", "tpvp", *map(str, argv)], capture_output=True, text=True,
                             cwd=cwd, env=env, timeout=300)
     return result.returncode, result.stdout, result.stderr
@@ -348,6 +349,109 @@ def _(tmp, capsys):
 def _(tmp, capsys):
     return run_cli(["greenhouse", "--dataset", tmp / "data", "--reference", "complete", "--output", tmp / "out"],
                    capsys)
+
+
+# --------------------------------------------------------------------------------------------------
+# a real session (tpvp session ...)
+
+
+def session(tmp, scans, capsys, *more) -> Path:
+    """A session started on day1.xyz (millimetres) in ``tmp/session``."""
+    folder = tmp / "session"
+    assert run_cli(["session", "start", "--previous", scans / "day1.xyz", *more, "--output", folder], capsys)[0] == 0
+    return folder
+
+
+def capture_with_nan(tmp, scans) -> Path:
+    """Today's scan as a capture (millimetres, the world frame) with 3 NaN rows, as a camera writes them."""
+    pts = np.loadtxt(scans / "day2.xyz")
+    pts[[0, 5, 9]] = np.nan
+    np.savetxt(tmp / "capture.xyz", pts)
+    return tmp / "capture.xyz"
+
+
+@row("session-nan-capture", 2, "capture.xyz: 3 of 12,500 points have NaN/inf coordinates (first at point 1)",
+     "tpvp session add: error: ", "pass --drop-invalid (tpvp plan, tpvp session start/add)")
+def _(tmp, scans, capsys):
+    folder = session(tmp, scans, capsys)
+    return run_cli(["session", "add", folder, "--cloud", capture_with_nan(tmp, scans)], capsys)
+
+
+@row("session-drop-invalid", 0, "tpvp: warning: ", "capture.xyz: dropped 3 of 12,500 points with NaN/inf coordinates")
+def _(tmp, scans, capsys):
+    folder = session(tmp, scans, capsys)
+    return run_cli(["session", "add", folder, "--cloud", capture_with_nan(tmp, scans), "--drop-invalid"], capsys)
+
+
+@row("session-plant-over-5-m", 0, "tpvp: warning: ", "day1.xyz: read as metres (--units m) the plant spans 46.2 m",
+     "give --units mm")
+def _(tmp, scans, capsys):
+    return run_cli(["session", "start", "--previous", scans / "day1.xyz", "--units", "m", "--output",
+                    tmp / "session"], capsys)
+
+
+@row("depth-png-8-bit", 2, "depth.png: an 8-bit PNG cannot hold depth (256 levels)",
+     "depth must be a 16-bit PNG in millimetres, or a .npy in metres")
+def _(tmp, scans, capsys):
+    from PIL import Image
+
+    folder = session(tmp, scans, capsys)
+    Image.fromarray(np.full((720, 1280), 200, dtype=np.uint8)).save(tmp / "depth.png")
+    return run_cli(["session", "add", folder, "--depth", tmp / "depth.png"], capsys)
+
+
+@row("depth-complex", 2, "depth.npy: the depth image holds complex numbers (complex128)", "depth must be real numbers")
+def _(tmp, scans, capsys):
+    folder = session(tmp, scans, capsys)
+    np.save(tmp / "depth.npy", np.full((720, 1280), 0.4 + 0.1j))
+    return run_cli(["session", "add", folder, "--depth", tmp / "depth.npy"], capsys)
+
+
+@row("intrinsics-not-finite", 2, "intrinsics.json: fx = NaN, cy = inf: the intrinsics must be finite numbers")
+def _(tmp, scans, capsys):
+    folder = session(tmp, scans, capsys)
+    np.save(tmp / "depth.npy", np.full((720, 1280), 0.4))
+    (tmp / "intrinsics.json").write_text('{"fx": NaN, "fy": 640, "cx": 640, "cy": "inf", "width": 1280, '
+                                         '"height": 720}')
+    return run_cli(["session", "add", folder, "--depth", tmp / "depth.npy", "--intrinsics", tmp / "intrinsics.json"],
+                   capsys)
+
+
+@row("pose-file-missing", 2, "--pose poses/view3.json: no such file", "a pose file, or a candidate view's index or name")
+def _(tmp, scans, capsys):
+    folder = session(tmp, scans, capsys)
+    return run_cli(["session", "add", folder, "--cloud", scans / "day2.xyz", "--pose", "poses/view3.json"], capsys)
+
+
+@row("session-busy", 3, "tpvp session add: error: session folder", "is being written by another run",
+     "run this command again when that one has finished (--wait SECONDS waits longer)")
+def _(tmp, scans, capsys):
+    import fcntl
+
+    folder = session(tmp, scans, capsys)
+    with open(tmp / ".session.tpvp-lock", "w") as lock:  # what another running `tpvp session` step holds
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        return run_cli(["session", "add", folder, "--cloud", scans / "day2.xyz", "--wait", "0"], capsys)
+
+
+@row("session-damaged", 2, "tpvp session add: error: ", "captures/000.npy (capture 1, view 17) is missing (deleted?)",
+     "`tpvp session check", "--repair` will drop capture 1 (view 17)")
+def _(tmp, scans, capsys):
+    folder = session(tmp, scans, capsys)
+    assert run_cli(["session", "add", folder, "--cloud", scans / "day2.xyz"], capsys)[0] == 0
+    (folder / "captures" / "000.npy").unlink()
+    return run_cli(["session", "add", folder, "--cloud", scans / "day2.xyz", "--pose", "3"], capsys)
+
+
+@row("session-interrupted-after-commit", 0, "tpvp session add: SIGINT received after capture 1 was recorded; the "
+     "step is complete")
+def _(tmp, scans, capsys):
+    folder = session(tmp, scans, capsys)
+    steps = 6  # the capture's two files and the state, the commit's two renames, the moment after it
+    env = {"TPVP_FAULT": f"interrupt@{steps}"}
+    code, out, err = run_subprocess(["session", "add", folder, "--cloud", scans / "day2.xyz"], cwd=tmp, env=env)
+    assert "capture 1: view 17" in out and len(json.loads((folder / "session.json").read_text())["captures"]) == 1
+    return code, out, err
 
 
 # --------------------------------------------------------------------------------------------------

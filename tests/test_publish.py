@@ -100,7 +100,7 @@ def test_a_fault_at_any_write_step_leaves_the_folder_wholly_old_or_wholly_new(tm
     with faults.inject(None):
         _write_run(tmp_path / "count", new)
         steps = faults.steps()
-    assert steps == len(new) + 2  # three file writes, then the two renames of the commit
+    assert steps == len(new) + 3  # three file writes, the two renames of the commit, the moment after it
     for step in range(1, steps + 1):
         _write_run(out, old)
         try:

@@ -72,7 +72,8 @@ def _stop_at_once(prog: str):
 
 def _interrupt(received: list):
     """Run handler: a ``KeyboardInterrupt`` in this process (so staged outputs are cleaned up),
-    for SIGTERM as for Ctrl-C; ``received`` remembers it."""
+    for SIGTERM as for Ctrl-C; ``received`` remembers it. Once the command's step is published
+    (:func:`tpvp.io.publish.arm_step`), the signal is only noted: the step is complete."""
     pid = os.getpid()
 
     def handler(signum, frame):
@@ -80,9 +81,14 @@ def _interrupt(received: list):
             signal.signal(signum, signal.SIG_DFL)
             os.kill(os.getpid(), signum)
             return
+        publish = sys.modules.get("tpvp.io.publish")  # not loaded: no step was published
+        if publish is not None and publish.step_published() is not None:
+            publish.note_late_signal(signum)
+            return
         received.append(signum)
         raise KeyboardInterrupt
     return handler
+
 
 
 def _redeliver(received: list, previous_hook):
@@ -107,10 +113,11 @@ def _end_interrupted(status: int) -> None:
     os._exit(status)
 
 
-def run_checked(prog: str, load_main) -> int:
+def run_checked(prog: str, load_main, exiting: bool = False) -> int:
     """Check the dependencies, then ``load_main()()`` (``load_main`` imports and returns the CLI's
     ``main``); a missing package, found up front or at import time, is one line and status 2; a
-    Ctrl-C or SIGTERM, one line and status 130."""
+    Ctrl-C or SIGTERM, one line and status 130. ``exiting``: the process ends with the returned
+    status (the commands' entry points), so a stop signal after the command ended is ignored."""
     previous = {signum: signal.getsignal(signum) for signum in _STOPS}
     previous_hook = sys.unraisablehook
     in_main_thread = threading.current_thread() is threading.main_thread()  # only it may set handlers
@@ -160,15 +167,18 @@ def run_checked(prog: str, load_main) -> int:
     finally:
         if in_main_thread:
             # After an interrupt, a redelivered signal may still be pending: it must not kill the
-            # process on its way out with the default handler.
+            # process on its way out with the default handler. When the process ends here, the
+            # status is decided: a signal while the interpreter shuts down (an atexit callback,
+            # joining threads) must neither print a traceback nor change it. Ignored, not handled:
+            # Python resets its own handlers to the default action late in the shutdown.
             for signum, handler in previous.items():
-                signal.signal(signum, signal.SIG_IGN if received else handler)
+                signal.signal(signum, signal.SIG_IGN if received or exiting else handler)
             sys.unraisablehook = previous_hook
 
 
 def main() -> int:
     """The ``tpvp`` command."""
-    return run_checked("tpvp", _load_main)
+    return run_checked("tpvp", _load_main, exiting=True)
 
 
 def _load_main():

@@ -12,7 +12,7 @@ from pathlib import Path
 
 from tpvp import __version__
 from tpvp.config import config_yaml, derived_table, load_config, parse_overrides
-from tpvp.cli_common import case_options, configuration_options, print_warnings, resolved_config
+from tpvp.cli_common import command_name, case_options, configuration_options, print_warnings, resolved_config
 from tpvp.errors import TpvpError, install_warning_format, run_command
 from tpvp.experiments import plants as plant_experiments
 from tpvp.experiments import rows as row_experiments
@@ -373,7 +373,7 @@ def main(argv=None) -> int:
     install_warning_format("tpvp")  # every warning one line, no module path or source line
     parser = build_parser()
     args = parser.parse_args(argv)
-    return run_command(args, f"tpvp {args.command}")
+    return run_command(args, command_name(args))
 
 
 if __name__ == "__main__":

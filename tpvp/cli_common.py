@@ -18,6 +18,12 @@ COVERAGE_TARGET_HELP = ("true coverage of today's plants to aim for, e.g. 0.98: 
                         "view space, selection.planning_miss_ratio: 0.5 hemisphere, 0.25 sphere and rooms); "
                         "1.0 = the paper's full set cover (default: the configuration's, 1.0)")
 
+
+def command_name(args) -> str:
+    """``tpvp plan``, ``tpvp session add``: how a command's error lines begin."""
+    return " ".join(["tpvp", args.command, *([args.step] if getattr(args, "step", None) else [])])
+
+
 def print_warnings(warnings) -> None:
     for warning in warnings:
         print(f"tpvp: warning: {warning}", file=sys.stderr)

@@ -1,10 +1,11 @@
-"""Deterministic fault injection for the fault tests: fail or interrupt at the N-th write step.
+"""Deterministic fault injection for the fault tests: fail, interrupt or pause at the N-th write step.
 
 Every write step of the library calls :func:`checkpoint` (each atomic file write before its rename,
-each step of a folder commit). Normally it only counts. Under :func:`inject` - or with the
-environment variable ``TPVP_FAULT=interrupt@N`` / ``TPVP_FAULT=enospc@N`` for a subprocess - the
-N-th step (from 1) sends SIGINT to the process (as a Ctrl-C would; the commit holds it back like a
-real one) or raises ``OSError(ENOSPC)`` as a full disk would.
+each step of a folder commit, and the moment just after a commit). Normally it only counts. Under
+:func:`inject` - or with the environment variable ``TPVP_FAULT=interrupt@N`` / ``enospc@N`` /
+``pause@N`` for a subprocess - the N-th step (from 1) sends SIGINT to the process (as a Ctrl-C
+would; the commit holds it back like a real one), raises ``OSError(ENOSPC)`` as a full disk would,
+or sleeps ``TPVP_FAULT_PAUSE_S`` seconds (default 2: a slow disk, to make two commands overlap).
 """
 
 from __future__ import annotations
@@ -13,8 +14,11 @@ import contextlib
 import errno
 import os
 import signal
+import time
 
-KINDS = ("interrupt", "enospc")
+KINDS = ("interrupt", "enospc", "pause")
+#: Steps that allocate no space: a full disk does not fail them.
+_NO_SPACE = ("commit", "swap", "published")
 _state = {"kind": None, "at": 0, "count": 0}
 
 
@@ -34,7 +38,9 @@ def checkpoint(step: str) -> None:
         return
     if _state["kind"] == "interrupt":
         os.kill(os.getpid(), signal.SIGINT)
-    elif step not in ("commit", "swap"):  # renames of the commit do not allocate space
+    elif _state["kind"] == "pause":
+        time.sleep(float(os.environ.get("TPVP_FAULT_PAUSE_S", "2")))
+    elif step not in _NO_SPACE:
         raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
 
 

@@ -13,6 +13,12 @@ experiment runners' caches) goes through :func:`staged_folder`:
    held back (delivered right after), so Ctrl-C lands before the commit (nothing changed) or after it (everything
    published), never between; the report says which (:class:`RunInterrupted`).
 
+A command that reads the destination and then writes it (a session step) holds the lock from the
+read to the commit with :func:`hold_folder`; :func:`staged_folder` inside it publishes under that
+lock, so no other run's commit can fall between the read and the write. A command whose work ends
+with its publish (:func:`arm_step`) is complete from the commit on: a stop signal after it is noted
+(:func:`late_signals`), not raised, so the command reports the finished step.
+
 A reader therefore sees the destination wholly old or wholly new. Nothing the command did not write
 is deleted: a run folder may only replace a folder that is empty or holds a previous tpvp run's
 files and nothing else (``.tpvp-run.json`` lists them); inputs inside the destination are refused.
@@ -33,6 +39,7 @@ import os
 import shutil
 import signal
 import threading
+import time
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Iterator
@@ -43,6 +50,10 @@ from tpvp.io.atomic import fsync_path
 
 RUN_MARKER = ".tpvp-run.json"
 _HELD = (signal.SIGINT, signal.SIGTERM)
+_WAIT_POLL_S = 0.05
+_locks: dict[str, int] = {}  # real path of a destination -> fd of the lock this process holds (hold_folder)
+# The command's step (arm_step): armed, the destination its commit published, signals that came after.
+_step = {"armed": False, "published": None, "signals": []}
 
 
 class RunInterrupted(KeyboardInterrupt):
@@ -70,17 +81,29 @@ class Stage:
         self.folder = folder
         self.published = False
 
-    def path(self, relative: str | os.PathLike) -> Path:
-        """Staging path of ``destination/relative``, parent created. A hard link to the old file
-        (``keep_existing``) is removed first, so writing there never alters the published copy."""
+    def _staged(self, relative: str | os.PathLike) -> Path:
         relative = Path(relative)
         if relative.is_absolute() or ".." in relative.parts:
             raise ConfigError(f"staged paths must be relative to {self.destination}, got {relative}")
-        staged = self.folder / relative
+        return self.folder / relative
+
+    def path(self, relative: str | os.PathLike) -> Path:
+        """Staging path of ``destination/relative``, parent created. A hard link to the old file
+        (``keep_existing``) is removed first, so writing there never alters the published copy."""
+        staged = self._staged(relative)
         staged.parent.mkdir(parents=True, exist_ok=True)
         with contextlib.suppress(FileNotFoundError):
             staged.unlink()
         return staged
+
+    def remove(self, relative: str | os.PathLike) -> None:
+        """Leave the file or folder ``destination/relative`` out of the new version (``keep_existing``)."""
+        staged = self._staged(relative)
+        if staged.is_dir() and not staged.is_symlink():
+            shutil.rmtree(staged)
+        else:
+            with contextlib.suppress(FileNotFoundError):
+                staged.unlink()
 
     def existing(self, relative: str | os.PathLike) -> Path:
         """Path of ``relative`` in the published destination (to read the old version)."""
@@ -123,21 +146,81 @@ def _check_writable(destination: Path, what: str) -> None:
                                f"choose a folder on a writable disk")
 
 
-def _lock(destination: Path, what: str) -> int:
+def _lock(destination: Path, what: str, wait: float = 0.0, on_wait=None,
+          advice: str = "wait for it to finish or choose another folder") -> int:
+    """Take ``destination``'s lock, waiting up to ``wait`` seconds for another run to release it
+    (``on_wait()`` is called once when it has to wait); :class:`BusyError` after that."""
     lock = _sibling(destination, "lock")
     try:
         fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o666)
     except OSError as exc:
         raise OutputWriteError(f"cannot write {what} {destination}: {exc.strerror or exc}") from None
+    deadline = time.monotonic() + wait
+    while True:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            return fd
+        except OSError as exc:
+            if exc.errno not in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES):
+                os.close(fd)
+                raise OutputWriteError(f"cannot lock {what} {destination}: {exc.strerror or exc}") from None
+        if time.monotonic() >= deadline:
+            os.close(fd)
+            waited = f" (waited {wait:g} s)" if wait > 0 else ""
+            raise BusyError(f"{what} {destination} is being written by another run{waited}; {advice}")
+        if on_wait is not None:
+            on_wait()
+            on_wait = None
+        time.sleep(_WAIT_POLL_S)
+
+
+def _lock_key(destination: Path) -> str:
+    return os.path.realpath(destination)
+
+
+@contextlib.contextmanager
+def hold_folder(destination, *, what: str = "output folder", wait: float = 0.0, on_wait=None,
+                advice: str = "wait for it to finish or choose another folder") -> Iterator[Path]:
+    """Hold ``destination``'s lock for the block (waiting up to ``wait`` seconds for another run,
+    then :class:`BusyError` with ``advice``), after repairing what a crashed run left: the block
+    reads the destination, and :func:`staged_folder` inside it publishes under the same lock, so no
+    other run's commit falls in between. Re-entrant within a process."""
+    destination = Path(destination).absolute()
+    key = _lock_key(destination)
+    if key in _locks:
+        yield destination
+        return
     try:
-        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        destination.parent.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
-        os.close(fd)
-        if exc.errno in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES):
-            raise BusyError(f"{what} {destination} is being written by another run; wait for it to finish "
-                            f"or choose another folder") from None
-        raise OutputWriteError(f"cannot lock {what} {destination}: {exc.strerror or exc}") from None
-    return fd
+        raise OutputWriteError(f"cannot create {destination.parent}: {exc.strerror or exc}") from None
+    _locks[key] = _lock(destination, what, wait, on_wait, advice)
+    try:
+        _recover(destination)
+        yield destination
+    finally:
+        os.close(_locks.pop(key))  # releases the flock
+
+
+def arm_step() -> None:
+    """The next publish completes this command's step: from its commit on, SIGINT and SIGTERM are
+    noted (:func:`late_signals`) instead of interrupting, so the command can finish its report."""
+    _step.update(armed=True, published=None, signals=[])
+
+
+def step_published() -> Path | None:
+    """The destination the armed step published (None before its commit, or when none is armed)."""
+    return _step["published"]
+
+
+def note_late_signal(signum: int) -> None:
+    """Record a stop signal that arrived after the step was published (the command's handler)."""
+    _step["signals"].append(signum)
+
+
+def late_signals() -> list[int]:
+    """The stop signals that arrived after the armed step was published."""
+    return list(_step["signals"])
 
 
 def _recover(destination: Path) -> None:
@@ -266,9 +349,10 @@ def _commit(stage: Stage, keep_existing: bool) -> None:
             os.rename(destination, old)
         faults.checkpoint("swap")
         os.rename(staging, destination)
-        stage.published = True
+        _published(stage)
         fsync_path(destination.parent)
         shutil.rmtree(old, ignore_errors=True)  # still held: no backup is left behind
+    faults.checkpoint("published")
 
 
 def _commit_in_place(stage: Stage) -> None:
@@ -286,11 +370,18 @@ def _commit_in_place(stage: Stage) -> None:
         faults.checkpoint("swap")
         journal.write_text("new\n")
         _move_entries(staging, destination)
-        stage.published = True
+        _published(stage)
         fsync_path(destination)
         journal.unlink()
         shutil.rmtree(old, ignore_errors=True)
         staging.rmdir()
+    faults.checkpoint("published")
+
+
+def _published(stage: Stage) -> None:
+    stage.published = True
+    if _step["armed"]:
+        _step.update(armed=False, published=stage.destination)
 
 
 @contextlib.contextmanager
@@ -307,6 +398,9 @@ def _signals_held():
     finally:
         for signum, handler in previous.items():
             signal.signal(signum, handler)
+    if _step["published"] is not None:  # the step is complete: note them, do not interrupt it
+        _step["signals"].extend(arrived)
+        return
     for signum in dict.fromkeys(arrived):
         signal.raise_signal(signum)  # now under the usual handler: KeyboardInterrupt for Ctrl-C
 
@@ -322,7 +416,10 @@ def staged_folder(destination, *, keep_existing: bool = False, inputs=(), what: 
         destination.parent.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise OutputWriteError(f"cannot create {destination.parent}: {exc.strerror or exc}") from None
-    lock = _lock(destination, what)
+    if not _step["armed"]:
+        _step["published"] = None  # not a step: signals interrupt up to the commit and after it
+    held = _lock_key(destination) in _locks  # hold_folder: the caller read under this lock
+    lock = None if held else _lock(destination, what)
     stage = None
     existed = destination.exists()
     try:
@@ -347,7 +444,8 @@ def staged_folder(destination, *, keep_existing: bool = False, inputs=(), what: 
     finally:
         if stage is not None and not stage.published:
             shutil.rmtree(stage.folder, ignore_errors=True)
-        os.close(lock)  # releases the flock
+        if lock is not None:
+            os.close(lock)  # releases the flock
 
 
 def _mentions(exc: BaseException, destination: Path) -> bool:

@@ -53,8 +53,8 @@ def _drop_nonfinite(path, pts, labels, drop_invalid):
         first = int(np.flatnonzero(bad)[0])
         raise PointCloudError(
             f"{path}: {nbad:,} of {len(pts):,} points {'has' if nbad == 1 else 'have'} NaN/inf coordinates "
-            f"(first at point {first + 1:,}); remove them, or pass --drop-invalid (tpvp plan) / "
-            f"drop_invalid=True (tpvp.io.read_point_cloud)")
+            f"(first at point {first + 1:,}); remove them, or pass --drop-invalid (tpvp plan, tpvp session "
+            f"start/add) / drop_invalid=True (tpvp.io.read_point_cloud)")
     warnings.warn(f"{path}: dropped {nbad:,} of {len(pts):,} points with NaN/inf coordinates",
                   stacklevel=3)
     keep = ~bad

@@ -41,12 +41,20 @@ def read_intrinsics(path) -> tuple[Intrinsics, float | None]:
     if missing:
         raise InputFileError(f"{path}: the intrinsics file lacks {', '.join(missing)} (needs fx, fy, cx, cy, "
                              f"width, height in pixels; depth_scale optional)")
+    keys = ["fx", "fy", "cx", "cy", "width", "height"] + (["depth_scale"] if data.get("depth_scale") is not None else [])
     try:
-        intrinsics = Intrinsics(float(data["fx"]), float(data["fy"]), float(data["cx"]), float(data["cy"]),
-                                int(data["width"]), int(data["height"]))
-        depth_scale = None if data.get("depth_scale") is None else float(data["depth_scale"])
+        values = {key: float(data[key]) for key in keys}
     except (TypeError, ValueError):
         raise InputFileError(f"{path}: fx, fy, cx, cy, width, height and depth_scale must be numbers") from None
+    infinite = [key for key in keys if not np.isfinite(values[key])]
+    if infinite:
+        raise InputFileError(f"{path}: {', '.join(f'{k} = {data[k]}' for k in infinite)}: the intrinsics must be "
+                             f"finite numbers (pixels; depth_scale in metres per unit)")
+    if any(values[key] != int(values[key]) for key in ("width", "height")):
+        raise InputFileError(f"{path}: width and height must be whole numbers of pixels")
+    intrinsics = Intrinsics(values["fx"], values["fy"], values["cx"], values["cy"], int(values["width"]),
+                            int(values["height"]))
+    depth_scale = values.get("depth_scale")
     if min(intrinsics.fx, intrinsics.fy, intrinsics.width, intrinsics.height, depth_scale or 1) <= 0:
         raise InputFileError(f"{path}: fx, fy, width, height and depth_scale must be positive")
     return intrinsics, depth_scale
@@ -75,6 +83,12 @@ def read_depth(path, depth_scale: float | None = None) -> np.ndarray:
     if raw.ndim != 2 or not np.issubdtype(raw.dtype, np.number):
         raise InputFileError(f"{path}: a depth image must be one channel of numbers, got shape {raw.shape} "
                              f"({raw.dtype})")
+    if np.iscomplexobj(raw):
+        raise InputFileError(f"{path}: the depth image holds complex numbers ({raw.dtype}); depth must be real "
+                             f"numbers (metres in a .npy)")
+    if suffix == ".png" and raw.dtype.itemsize < 2:
+        raise InputFileError(f"{path}: an 8-bit PNG cannot hold depth (256 levels); depth must be a 16-bit PNG in "
+                             f"millimetres, or a .npy in metres")
     scale = (1.0 if suffix == ".npy" else 0.001) if depth_scale is None else float(depth_scale)
     depth = raw.astype(np.float64) * scale
     depth[~np.isfinite(depth) | (depth <= 0)] = np.nan

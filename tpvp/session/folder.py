@@ -5,12 +5,16 @@ captures, the last plan), ``config.yaml`` (the resolved configuration), ``previo
 previous model in the world frame, metres), ``captures/NNN.npy`` (each capture's voxel keys at the
 ground-truth resolution, planning frame) and ``plan/`` (the last plan, as ``tpvp plan`` writes it).
 Every step rewrites the folder through :func:`tpvp.io.publish.staged_folder`: a crash or Ctrl-C
-leaves it as it was after the last finished step. :class:`Session` holds what plants and rows
+leaves it as it was after the last finished step. A step holds the folder's lock from its read to
+its commit (:meth:`Session.held`), and a commit refuses a state that changed since it was read, so
+two commands on one folder never lose a capture. :meth:`Session.open` refuses a damaged folder with
+one line (:mod:`tpvp.session.check` lists and repairs). :class:`Session` holds what plants and rows
 share; :mod:`tpvp.session.plant` and :mod:`tpvp.session.row` what differs.
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
 from dataclasses import dataclass
 from datetime import datetime, timezone
@@ -21,16 +25,17 @@ import numpy as np
 
 from tpvp import __version__
 from tpvp.config import config_yaml, load_config
-from tpvp.errors import ConfigError, InputFileError, PointCloudError, checked_cloud
+from tpvp.errors import BusyError, ConfigError, InputFileError, PointCloudError, checked_cloud
 from tpvp.io import atomic_write_bytes, atomic_write_text, write_point_cloud
-from tpvp.io.publish import staged_folder
+from tpvp.io.publish import hold_folder, staged_folder
 from tpvp.scene import voxels
 from tpvp.sensor.camera import look_at_rotation, rotation_to_quaternion
 from tpvp.session.captures import Pose, back_project, surface_voxel_keys
+from tpvp.session.check import (FORMAT, STATE, VERSION, capture_number, centroid_file, folder_problems,
+                                 state_text)
 
-FORMAT = "tpvp-session"
-VERSION = 1
-STATE = "session.json"
+#: How another command is told to wait for the folder: the session's own advice, not another folder.
+BUSY_ADVICE = "run this command again when that one has finished (--wait SECONDS waits longer)"
 #: A cloud counts as in the world frame when at least this fraction of its points lies near the plant.
 MIN_INSIDE = 0.5
 KINDS: dict = {}  # kind -> Session subclass (plant, row), filled by the subclasses' modules
@@ -44,11 +49,6 @@ def npy_bytes(array: np.ndarray) -> bytes:
     buffer = BytesIO()
     np.save(buffer, np.ascontiguousarray(array), allow_pickle=False)
     return buffer.getvalue()
-
-
-def centroid_file(record: dict) -> str:
-    """The file of a capture's per-voxel point centroids, beside its voxel keys."""
-    return record["file"].replace(".npy", "_centroids.npy")
 
 
 @dataclass(frozen=True)
@@ -81,6 +81,7 @@ class Session:
         self.folder, self.config, self.state = Path(folder), config, state
         self.previous_scan = previous_scan
         self.scene = self._scene(previous_scan)
+        self._read = state_text(state)  # session.json as read: a commit refuses a changed one
 
     # -- what plants and rows define ----------------------------------------------------------------
 
@@ -107,25 +108,49 @@ class Session:
     # -- the folder -------------------------------------------------------------------------------
 
     @classmethod
-    def start(cls, folder, previous_scan, config, previous_file: str = "previous model", units: str = "m") -> "Session":
+    def start(cls, folder, previous_scan, config, previous_file: str = "previous model", units: str = "m",
+              wait: float = 0.0) -> "Session":
         """A new session in ``folder`` (new or empty) planning on ``previous_scan`` (metres, its own
-        frame: the world frame); ``units``: the units its file was read in, for the captures' files."""
+        frame: the world frame); ``units``: the units its file was read in, for the captures' files;
+        ``wait``: seconds to wait for another command on the folder."""
         if config.setting not in KINDS:
             raise ConfigError(f"tpvp session plans {' and '.join(KINDS)} settings, not {config.setting!r}")
-        if (Path(folder) / STATE).is_file():
-            raise ConfigError(f"{folder} already holds a session: continue it (`tpvp session add {folder}`), or start "
-                              f"the new one in a new folder")
         kind = KINDS[config.setting]
         config = kind.session_config(config)
         points = checked_cloud(previous_scan, previous_file)
         state = {"format": FORMAT, "version": VERSION, "tpvp": __version__, "kind": config.setting,
                  "created_utc": _now(), "previous_file": str(previous_file), "units": units, "captures": []}
         session = kind(folder, config, state, points)
-        with staged_folder(folder, what="session folder") as stage:
-            atomic_write_bytes(stage.path("previous.npy"), npy_bytes(points))
-            atomic_write_text(stage.path("config.yaml"), config_yaml(config, "the session's configuration"))
-            atomic_write_text(stage.path(STATE), json.dumps(state, indent=1) + "\n")
+        with cls.locked(folder, wait):
+            if (Path(folder) / STATE).is_file():  # checked under the lock: two starts cannot both pass
+                raise ConfigError(f"{folder} already holds a session: continue it (`tpvp session add {folder}`), "
+                                  f"or start the new one in a new folder")
+            with staged_folder(folder, what="session folder") as stage:
+                atomic_write_bytes(stage.path("previous.npy"), npy_bytes(points))
+                atomic_write_text(stage.path("config.yaml"), config_yaml(config, "the session's configuration"))
+                atomic_write_text(stage.path(STATE), state_text(state))
         return session
+
+    @staticmethod
+    def locked(folder, wait: float = 0.0, on_wait=None):
+        """Hold ``folder``'s lock for a block (:func:`tpvp.io.publish.hold_folder`), as a step does."""
+        return hold_folder(folder, what="session folder", wait=wait, on_wait=on_wait, advice=BUSY_ADVICE)
+
+    @staticmethod
+    def problems(folder) -> list:
+        """Every problem of the session folder (:func:`tpvp.session.check.folder_problems`)."""
+        return folder_problems(folder, KINDS)
+
+    @classmethod
+    @contextlib.contextmanager
+    def held(cls, folder, wait: float = 0.0, on_wait=None):
+        """The session in ``folder`` (:meth:`open`), its lock held for the block: no other command's
+        commit falls between this one's read and its own commit. Waits up to ``wait`` seconds for
+        another command (``on_wait()`` once if it has to), then :class:`~tpvp.errors.BusyError`."""
+        if not (Path(folder) / STATE).is_file():
+            cls.open(folder)  # not a session folder: refused before a lock file is made beside it
+        with cls.locked(folder, wait, on_wait):
+            yield cls.open(folder)
 
     @classmethod
     def session_config(cls, config):
@@ -133,38 +158,44 @@ class Session:
 
     @classmethod
     def open(cls, folder) -> "Session":
-        """The session in ``folder``; one clear error for a folder that is not one or is of another version."""
+        """The session in ``folder``; one clear error (:class:`~tpvp.errors.InputFileError`) for a
+        folder that is not one, is damaged or is of another version: its first problem and what to
+        do (``tpvp session check`` lists them all)."""
         folder = Path(folder)
-        state_file = folder / STATE
-        if not state_file.is_file():
-            raise InputFileError(f"{folder}: not a session folder (no {STATE}); start one with `tpvp session start`")
-        try:
-            state = json.loads(state_file.read_text())
-        except (OSError, ValueError) as exc:
-            raise InputFileError(f"{state_file}: unreadable session state ({exc})") from None
-        if not isinstance(state, dict) or state.get("format") != FORMAT:
-            raise InputFileError(f"{state_file}: not a tpvp session state file")
-        if state.get("version") != VERSION or state.get("kind") not in KINDS:
-            raise InputFileError(f"{folder}: a session of format version {state.get('version')!r} (tpvp "
-                                 f"{state.get('tpvp', '?')}); this tpvp reads version {VERSION}: finish it with "
-                                 f"that version, or start a new session")
-        try:
-            previous = np.load(folder / "previous.npy", allow_pickle=False)
-        except (OSError, ValueError) as exc:
-            raise InputFileError(f"{folder / 'previous.npy'}: unreadable ({exc})") from None
-        return KINDS[state["kind"]](folder, load_config(folder / "config.yaml"), state, previous)
+        problems = cls.problems(folder)
+        if problems:
+            more = (f" ({len(problems) - 1} more: `tpvp session check {folder}` lists them)"
+                    if len(problems) > 1 else "")
+            raise InputFileError(problems[0].line(folder) + more)
+        state = json.loads((folder / STATE).read_text())
+        previous = np.load(folder / "previous.npy", allow_pickle=False)
+        session = KINDS[state["kind"]](folder, load_config(folder / "config.yaml"), state, previous)
+        views = len(session.views()[0])
+        wrong = [c["view"] for c in session.captures if c["view"] >= views]
+        if wrong:
+            raise InputFileError(f"{folder / STATE}: a capture of view {wrong[0]}, but this session's views are "
+                                 f"0..{views - 1} (edited by hand?): restore it from a backup")
+        return session
 
     def commit(self, state: dict, files: dict | None = None, write=None) -> None:
         """Write ``files`` (relative name -> bytes or text), what ``write(staging folder)`` writes
-        and the new state, in one step."""
+        and the new state, in one step. Refused (:class:`~tpvp.errors.BusyError`) when session.json
+        changed since this session read it."""
         with staged_folder(self.folder, keep_existing=True, what="session folder") as stage:
+            try:
+                on_disk = state_text(json.loads(stage.existing(STATE).read_text()))  # formatting aside
+            except (OSError, ValueError):
+                on_disk = None
+            if on_disk != self._read:
+                raise BusyError(f"session folder {self.folder} changed since this command read it (another command "
+                                f"recorded a step); nothing was written: run this command again")
             for name, data in (files or {}).items():
                 writer = atomic_write_text if isinstance(data, str) else atomic_write_bytes
                 writer(stage.path(name), data)
             if write is not None:
                 write(stage.folder)
-            atomic_write_text(stage.path(STATE), json.dumps(state, indent=1) + "\n")
-        self.state = state
+            atomic_write_text(stage.path(STATE), state_text(state))
+        self.state, self._read = state, state_text(state)
 
     def commit_plan(self, write_outputs, plan: dict) -> None:
         """Write ``plan/`` (``write_outputs(folder)``) and record ``plan`` in the state, in one step."""
@@ -219,7 +250,7 @@ class Session:
     def view_index(self, view) -> int:
         positions, _ = self.views()
         if not str(view).lstrip("-").isdigit() or not 0 <= int(view) < len(positions):
-            raise ConfigError(f"--pose {view}: this session's views are 0..{len(positions) - 1}")
+            raise ConfigError(f"--pose {view}: not one of this session's views (0..{len(positions) - 1}), nor a pose file")
         return int(view)
 
     # -- captures ---------------------------------------------------------------------------------
@@ -269,12 +300,19 @@ class Session:
         keys = voxels.decode_keys(codes)
         kept = self._keep(keys)
         keys, centroids = keys[kept], centroids[kept]
-        index = len(self.captures)
-        record = {"view": int(view), "file": f"captures/{index:03d}.npy", "source": str(source), "kind": kind,
-                  "points": int(total), "points_kept": int(len(points)), "voxels": int(len(keys)), "added_utc": _now()}
+        record = {"view": int(view), "file": f"captures/{self._next_capture_number():03d}.npy", "source": str(source),
+                  "kind": kind, "points": int(total), "points_kept": int(len(points)), "voxels": int(len(keys)), "added_utc": _now()}
         self.commit(dict(self.state, captures=[*self.captures, record]),
                     {record["file"]: npy_bytes(keys), centroid_file(record): npy_bytes(centroids)})
         return record
+
+    def _next_capture_number(self) -> int:
+        """One past every capture file's number, recorded or on disk: a capture never replaces a file."""
+        names = [c["file"] for c in self.captures]
+        if (self.folder / "captures").is_dir():
+            names += [p.relative_to(self.folder).as_posix() for p in (self.folder / "captures").iterdir()]
+        numbers = [n for n in map(capture_number, names) if n is not None]
+        return max(numbers, default=-1) + 1
 
     def _far_message(self, points, near, source) -> str:
         centre = self.scene.to_scan(self.scene.previous.mean(axis=0, keepdims=True))[0]

@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from tpvp.config import PlantConfig, with_overrides
+from tpvp.errors import ConfigError
 from tpvp.experiments.single_plant import plan_case, transfer
 from tpvp.nbv.warm_up import start_nbv
 from tpvp.scene import voxels
@@ -82,7 +83,13 @@ class PlantSession(Session):
         return space.positions, space.look_ats
 
     def view_index(self, view) -> int:
-        return self.scene.view_space.view_index(int(view) if str(view).lstrip("-").isdigit() else view)
+        space = self.scene.view_space
+        try:
+            return space.view_index(int(view) if str(view).lstrip("-").isdigit() else view)
+        except ConfigError:
+            names = f" or a name ({', '.join(sorted(space.initial_views))})" if space.initial_views else ""
+            raise ConfigError(f"--pose {view}: not one of this session's views: an index 0..{len(space) - 1}"
+                              f"{names}, or a pose file") from None
 
     def nbv(self):
         """The NBV method with every capture integrated, in order."""

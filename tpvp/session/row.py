@@ -19,7 +19,8 @@ from tpvp.errors import ConfigError
 from tpvp.experiments.greenhouse import RowScene, check_row, plan_row_case, row_transfer
 from tpvp.scene import voxels
 from tpvp.scene.boxes import room_config
-from tpvp.session.folder import KINDS, Request, Session, centroid_file
+from tpvp.session.check import centroid_file
+from tpvp.session.folder import KINDS, Request, Session
 
 
 @dataclass(frozen=True, eq=False)

@@ -1,0 +1,192 @@
+"""Sessions that hold (issue 34): two commands on one session folder (real processes), a folder
+damaged by hand (one line and exit 2 from every command, listed and repaired by `session check`),
+stop signals across a step. The concurrent and signal tries come from
+``benchmarks/session_faults.py``, which runs every pair and delay and 50 signal moments."""
+
+import json
+import shutil
+import signal
+
+import pytest
+
+from helpers import benchmark_module, tree_digest
+from tpvp.errors import BusyError
+from tpvp.io import read_point_cloud
+from tpvp.session import Session
+from tpvp.session.cli import main
+
+session_faults = benchmark_module("session_faults")
+
+
+@pytest.fixture(scope="module")
+def bench(tmp_path_factory):
+    """Capture clouds and the ``one`` / ``ready`` sessions of the benchmark."""
+    return session_faults.prepare(tmp_path_factory.mktemp("bench"))
+
+
+@pytest.fixture(scope="module")
+def planned_once(bench):
+    """A session with its warm-up captured and a plan written (every file a session can hold)."""
+    folder = session_faults.copy_session(bench["ready"], bench["ready"].parent / "planned")
+    Session.open(folder).plan()
+    return folder
+
+
+@pytest.fixture
+def planned(planned_once, tmp_path):
+    return session_faults.copy_session(planned_once, tmp_path / "session")
+
+
+# --- two commands on one folder --------------------------------------------------------------------
+
+@pytest.mark.parametrize("pair", session_faults.PAIRS)
+def test_a_second_command_waits_for_the_first_and_both_are_recorded(bench, tmp_path, pair):
+    # The first command is paused between its read and its commit; the second starts then.
+    result = session_faults.concurrent_try(pair, tmp_path / "session", bench, delay=0.0, pause=True)
+    assert session_faults.concurrent_ok(result) == []
+    assert [run["rc"] for _, run in result["results"]] == [0, 0]
+    second = result["results"][1][1]
+    assert any("is being written by another run; waiting for it" in line for line in second["stderr"])
+
+
+def test_a_second_command_that_cannot_wait_is_refused_with_exit_3(bench, tmp_path):
+    result = session_faults.concurrent_try("add/add", tmp_path / "session", bench, delay=0.0, pause=True, wait=0)
+    assert session_faults.concurrent_ok(result) == []
+    (_, first), (_, second) = result["results"]
+    assert first["rc"] == 0 and second["rc"] == 3
+    assert second["stderr"] == [f"tpvp session add: error: session folder {tmp_path / 'session'} is being written "
+                                "by another run; run this command again when that one has finished (--wait "
+                                "SECONDS waits longer)"]
+    assert [c["view"] for c in result["state"]["captures"]] == [17, 3, session_faults.EXTRA[0]]
+
+
+def test_a_commit_on_a_state_that_changed_since_it_was_read_is_refused(bench, tmp_path):
+    """Without the lock held (the library used from two places): the second commit sees the first."""
+    folder = session_faults.copy_session(bench["ready"], tmp_path / "session")
+    first, second = Session.open(folder), Session.open(folder)
+    first.add(read_point_cloud(bench["cloud5"], units="mm"), 5, "first")
+    with pytest.raises(BusyError, match="changed since this command read it .* nothing was written"):
+        second.add(read_point_cloud(bench["cloud6"], units="mm"), 6, "second")
+    assert [c["view"] for c in Session.open(folder).captures] == [17, 3, 5]
+    assert Session.problems(folder) == []
+
+
+# --- a folder damaged by hand ----------------------------------------------------------------------
+
+def _truncate(path):
+    path.write_bytes(path.read_bytes()[: len(path.read_bytes()) // 2])
+
+
+def _edit_state(change):
+    def edit(folder):
+        state = json.loads((folder / "session.json").read_text())
+        change(state)
+        (folder / "session.json").write_text(json.dumps(state))
+    return edit
+
+
+# kind -> (damage, the line's key text, repairable)
+DAMAGES = {
+    "capture file gone": (lambda f: (f / "captures/001.npy").unlink(),
+                          "captures/001.npy (capture 2, view 3) is missing (deleted?)", True),
+    "centroids gone": (lambda f: (f / "captures/000_centroids.npy").unlink(),
+                       "captures/000_centroids.npy (capture 1, view 17) is missing", True),
+    "capture truncated": (lambda f: _truncate(f / "captures/001.npy"),
+                          "captures/001.npy (capture 2, view 3) is damaged (truncated?", True),
+    "orphan capture file": (lambda f: shutil.copy(f / "captures/001.npy", f / "captures/007.npy"),
+                            "captures/007.npy is not a file of any capture in session.json", True),
+    "plan file gone": (lambda f: (f / "plan/plan.csv").unlink(), "plan/plan.csv is missing (deleted?)", True),
+    "previous model gone": (lambda f: (f / "previous.npy").unlink(),
+                            "previous.npy (the previous model) is missing", False),
+    "previous model truncated": (lambda f: _truncate(f / "previous.npy"),
+                                 "previous.npy (the previous model) is damaged", False),
+    "configuration gone": (lambda f: (f / "config.yaml").unlink(),
+                           "config.yaml (the session's configuration) is missing", False),
+    "state gone": (lambda f: (f / "session.json").unlink(), "session.json (the session's state) is missing", False),
+    "state truncated": (lambda f: _truncate(f / "session.json"), "session.json: not valid JSON", False),
+    "state malformed": (lambda f: (f / "session.json").write_text("{'format': 'tpvp-session'}"),
+                        "session.json: not valid JSON", False),
+    "captures key missing": (_edit_state(lambda s: s.pop("captures")), "session.json: no 'captures' key", False),
+    "capture record edited": (_edit_state(lambda s: s["captures"][0].update(file="../../etc/passwd")),
+                              "capture 1 has no valid 'file'", False),
+    "version from the future": (_edit_state(lambda s: s.update(version=2, tpvp="9.0")),
+                                "a session of format version 2 (tpvp 9.0); this tpvp reads version 1: update tpvp",
+                                False),
+}
+
+
+def _commands(folder, bench, tmp_path):
+    cloud = bench[f"cloud{session_faults.EXTRA[0]}"]
+    return {"add": ["add", folder, "--cloud", cloud, "--pose", session_faults.EXTRA[0]],
+            "plan": ["plan", folder], "export": ["export", folder, "--model", tmp_path / "today.ply"]}
+
+
+@pytest.mark.parametrize("damage", DAMAGES)
+def test_a_damaged_folder_is_one_line_and_exit_2_from_every_command(planned, bench, tmp_path, capsys, damage):
+    harm, text, repairable = DAMAGES[damage]
+    harm(planned)
+    before = tree_digest(planned)
+    for name, argv in _commands(planned, bench, tmp_path).items():
+        assert main(["session", *map(str, argv)]) == 2, name
+        out, err = capsys.readouterr()
+        lines = err.strip().splitlines()
+        assert len(lines) == 1 and lines[0].startswith(f"tpvp session {name}: error: "), (name, lines)
+        assert text in lines[0], (name, lines[0])
+        assert ("--repair` will" in lines[0]) == repairable, lines[0]
+    assert not (tmp_path / "today.ply").exists()
+    assert main(["session", "check", str(planned)]) == 2
+    out, err = capsys.readouterr()
+    assert any(text in line for line in out.splitlines() if line.startswith("problem: ")), out
+    assert "1 problem" in err
+    assert tree_digest(planned) == before  # nothing was changed by any of them
+
+
+def test_repair_drops_what_is_gone_removes_orphans_and_the_session_goes_on(planned, bench, tmp_path, capsys):
+    (planned / "captures/001.npy").unlink()
+    shutil.copy(planned / "captures/000.npy", planned / "captures/004.npy")
+    (planned / "plan/plan.json").unlink()
+    assert main(["session", "check", str(planned)]) == 2
+    out, err = capsys.readouterr()
+    assert out.count("problem: ") == 3 and "3 problems; `tpvp session check" in err and "--repair` repairs 3" in err
+    assert main(["session", "check", str(planned), "--repair"]) == 0
+    out = capsys.readouterr().out
+    assert "repair: drop capture 2 (view 3)" in out and "repair: remove captures/004.npy" in out
+    assert "repair: drop the plan (run `tpvp session plan` again)" in out
+    assert "a plant session, 1 capture, no plan yet; no problem found" in out
+    assert "next: capture view 3 (warm-up NBV 1 of 1)" in out
+    assert sorted(p.name for p in (planned / "captures").iterdir()) == ["000.npy", "000_centroids.npy"]
+    assert not (planned / "plan").exists()
+    assert main(["session", "add", str(planned), "--cloud", str(bench["cloud3"])]) == 0
+    assert Session.open(planned).captures[-1]["file"] == "captures/001.npy"
+    assert Session.problems(planned) == []
+
+
+def test_check_on_a_sound_folder(planned, capsys):
+    assert main(["session", "check", str(planned)]) == 0
+    out = capsys.readouterr().out
+    assert "a plant session, 2 captures, a plan of 6 views; no problem found" in out
+
+
+# --- stop signals across a step --------------------------------------------------------------------
+
+@pytest.mark.parametrize("kind", ["add", "plan"])
+def test_a_signal_at_the_commit_and_after_it_ends_with_the_step_complete(bench, tmp_path, kind):
+    folder = tmp_path / "session"
+    steps = session_faults.count_steps(kind, folder, bench)
+    for step in (steps - 2, steps):  # the commit's first rename; the moment after the commit
+        result = session_faults.signal_try(kind, folder, bench, signal.SIGINT, step=step)
+        assert session_faults.signal_ok(result) == [], result
+        assert result["rc"] == 0 and result["done"]
+        done = "capture 2 was recorded" if kind == "add" else "the plan was written"
+        assert result["stderr"] == [f"tpvp session {kind}: SIGINT received after {done}; the step is complete"]
+    result = session_faults.signal_try(kind, folder, bench, signal.SIGINT, step=1)  # before the commit
+    assert session_faults.signal_ok(result) == [] and result["rc"] == 130 and result["unchanged"], result
+
+
+@pytest.mark.parametrize("kind", ["add", "plan"])
+def test_signals_at_random_moments_of_a_step_leave_status_line_and_folder_in_agreement(bench, tmp_path, kind):
+    folder = tmp_path / "session"
+    duration = session_faults.timed(kind, folder, bench)
+    for delay, signum in session_faults.signal_moments(3, duration, seed=3):
+        result = session_faults.signal_try(kind, folder, bench, signum, delay=delay)
+        assert session_faults.signal_ok(result) == [], result
