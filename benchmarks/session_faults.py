@@ -4,11 +4,11 @@
     python benchmarks/session_faults.py signals [--tries 50]
 
 ``concurrent`` runs two real ``tpvp session`` processes on one folder: add/add, plan/add,
-add/plan and export/add. The first is slowed at its first write (a slow disk,
-``TPVP_FAULT=pause@1``: it has read the state and not yet committed) and the second starts 0 or
-1 s after the first reached that point, or both start 0.0-1.5 s apart without a pause; then once
-more with ``--wait 0``. A try holds when every capture a command reported is in the state, a
-refused command said so in one line with exit 3, and the folder has no problem (no orphan file).
+add/plan and export/add. The first is held at its first write (``TPVP_FAULT=pause@1``: it has
+read the state and not yet committed) until the second, started 0 or 1 s later, says it waits
+(or, with ``--wait 0``, has ended); or both start 0.0-1.5 s apart without a pause. A try holds
+when every capture a command reported is in the state, a refused command said so in one line with
+exit 3, and the folder has no problem (no orphan file).
 
 ``signals`` sends SIGINT or SIGTERM (alternately) to ``session add`` and ``session plan``: at each
 of their write steps (the commit's renames and the moment after it included, ``TPVP_FAULT=
@@ -93,14 +93,17 @@ def problems(folder: Path) -> list[str]:
     return found + [f"left beside the folder: {name}" for name in sorted(left)]
 
 
-def _finish(process: subprocess.Popen) -> dict:
+def _finish(process: subprocess.Popen, read=()) -> dict:
+    """The process's end: exit status (None: killed after :data:`HANG_S`), stdout, stderr lines
+    (``read``: what was read of its stderr before)."""
     try:
         out, err = process.communicate(timeout=HANG_S)
+        rc = process.returncode
     except subprocess.TimeoutExpired:
         process.kill()
         out, err = process.communicate()
-        return {"rc": None, "stdout": out, "stderr": err.strip().splitlines()}
-    return {"rc": process.returncode, "stdout": out, "stderr": err.strip().splitlines()}
+        rc = None
+    return {"rc": rc, "stdout": out, "stderr": ("".join(read) + err).strip().splitlines()}
 
 
 def _start(argv, env=None) -> subprocess.Popen:
@@ -123,14 +126,16 @@ def pair_commands(pair: str, folder: Path, paths: dict, wait: float) -> list[tup
 
 
 def concurrent_try(pair: str, folder: Path, paths: dict, delay: float, pause: bool, wait: float = 60) -> dict:
-    """Run ``pair`` on a fresh copy of the ``ready`` session: the second command starts ``delay``
-    seconds after the first has read the state and paused before its commit (``pause``), or after
-    the first started."""
+    """Run ``pair`` on a fresh copy of the ``ready`` session. ``pause``: the first command stops
+    between its read and its commit (at its first write) until the second has started and either
+    ended or said it waits; else the second starts ``delay`` seconds after the first."""
     copy_session(paths["ready"], folder)
     before = len(state(folder)["captures"])
     (first_kind, first), (second_kind, second) = pair_commands(pair, folder, paths, wait)
-    env = {"TPVP_FAULT": "pause@1", "TPVP_FAULT_PAUSE_S": "2"} if pause else None
-    a = _start(first, env)
+    go_on = folder.parent / f"{folder.name}.go-on"
+    go_on.unlink(missing_ok=True)
+    env = {"TPVP_FAULT": "pause@1", "TPVP_FAULT_PAUSE_S": str(HANG_S), "TPVP_FAULT_PAUSE_UNTIL": str(go_on)}
+    a = _start(first, env if pause else None)
     if pause:  # until the first holds the folder and writes (it read the state before)
         deadline = time.monotonic() + HANG_S
         while not list(folder.parent.glob(f".{folder.name}.tpvp-staging-*")) and a.poll() is None \
@@ -138,7 +143,12 @@ def concurrent_try(pair: str, folder: Path, paths: dict, delay: float, pause: bo
             time.sleep(0.01)
     time.sleep(delay)
     b = _start(second)
-    results = [(first_kind, _finish(a)), (second_kind, _finish(b))]
+    said = []
+    if pause:  # the second has ended (refused) or says it waits: let the first go on
+        said.append(b.stderr.readline())
+        go_on.touch()
+    results = [(first_kind, _finish(a)), (second_kind, _finish(b, said))]
+    go_on.unlink(missing_ok=True)
     return {"pair": pair, "delay": delay, "pause": pause, "wait": wait, "before": before, "results": results,
             "state": state(folder), "problems": problems(folder)}
 

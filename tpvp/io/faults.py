@@ -5,7 +5,8 @@ each step of a folder commit, and the moment just after a commit). Normally it o
 :func:`inject` - or with the environment variable ``TPVP_FAULT=interrupt@N`` / ``enospc@N`` /
 ``pause@N`` for a subprocess - the N-th step (from 1) sends SIGINT to the process (as a Ctrl-C
 would; the commit holds it back like a real one), raises ``OSError(ENOSPC)`` as a full disk would,
-or sleeps ``TPVP_FAULT_PAUSE_S`` seconds (default 2: a slow disk, to make two commands overlap).
+or sleeps ``TPVP_FAULT_PAUSE_S`` seconds (default 2: a slow disk, to make two commands overlap;
+with ``TPVP_FAULT_PAUSE_UNTIL=FILE``, until that file exists, at most as long).
 """
 
 from __future__ import annotations
@@ -39,7 +40,10 @@ def checkpoint(step: str) -> None:
     if _state["kind"] == "interrupt":
         os.kill(os.getpid(), signal.SIGINT)
     elif _state["kind"] == "pause":
-        time.sleep(float(os.environ.get("TPVP_FAULT_PAUSE_S", "2")))
+        until = os.environ.get("TPVP_FAULT_PAUSE_UNTIL")  # a file another process creates to let it go on
+        deadline = time.monotonic() + float(os.environ.get("TPVP_FAULT_PAUSE_S", "2"))
+        while time.monotonic() < deadline and not (until and os.path.exists(until)):
+            time.sleep(0.01)
     elif step not in _NO_SPACE:
         raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
 
