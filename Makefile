@@ -18,6 +18,9 @@ $(STAMP): environment.txt pyproject.toml
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	$(BIN)/python -m pip install --quiet -r environment.txt
 	$(BIN)/python -m pip install --quiet --no-deps -e .
+	@# dash (open3d's dependency) ships a JupyterLab source extension that makes JupyterLab ask for a
+	@# build on every start; nothing here uses dash in JupyterLab.
+	@rm -f $(VENV)/share/jupyter/lab/extensions/dash-jupyterlab.tgz
 	@touch $(STAMP)
 
 # open3d needs the system library libusb-1.0: install it when missing (as root), else say how.

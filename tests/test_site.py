@@ -34,6 +34,17 @@ _LINKS = "() => Array.from(document.querySelectorAll('a[href]')).map(a => a.href
 _PLOTLY_RENDERED = """() => Array.from(document.querySelectorAll('.plotly-graph-div'))
     .filter(div => div.querySelector('svg.main-svg, canvas')).length"""
 _MATH_RENDERED = "() => document.querySelectorAll('.MathJax, .MathJax_Display, mjx-container').length"
+# Tables wider than the page's column (they would need a sideways scroll), as (first header, width, column).
+_WIDE_TABLES = """() => { const column = document.querySelector('.md-content__inner').getBoundingClientRect().width;
+    return Array.from(document.querySelectorAll('.md-content table'))
+        .filter(t => t.scrollWidth > column + 1 || t.getBoundingClientRect().width > column + 1)
+        .map(t => [(t.querySelector('th') || {}).textContent || '', Math.round(t.scrollWidth), Math.round(column)]); }"""
+_STDERR_BLOCKS = "() => document.querySelectorAll('[data-mime-type=\"application/vnd.jupyter.stderr\"]').length"
+# Figures of a notebook page: (shown width, natural width, column width).
+_FIGURES = """() => { const column = document.querySelector('.md-content__inner').getBoundingClientRect().width;
+    return Array.from(document.querySelectorAll('.jp-RenderedImage img'))
+        .map(img => [img.getBoundingClientRect().width, img.naturalWidth, column]); }"""
+VIEWPORT = {"width": 1600, "height": 1000}
 
 
 class _QuietHandler(http.server.SimpleHTTPRequestHandler):
@@ -64,6 +75,22 @@ def _has_math(notebook: Path) -> bool:
 
     cells = nbformat.read(notebook, as_version=4).cells
     return any(cell.cell_type == "markdown" and re.search(r"\$[^$\n]+\$", cell.source) for cell in cells)
+
+
+def _unshipped_notebooks() -> set:
+    """Notebooks whose paper tables are not all shipped (tpvp/data/results): they may make a reduced run."""
+    import nbformat
+
+    from tpvp.experiments import shipped
+    from tpvp.experiments.notebooks import notebook_paths
+
+    found = set()
+    for path in notebook_paths():
+        code = "\n".join(cell.source for cell in nbformat.read(path, as_version=4).cells)
+        names = re.findall(r'protocol_results\(\s*output,\s*"(\w+)"', code)
+        if any(shipped.shipped_rows(name) is None for name in names):
+            found.add(path.stem)
+    return found
 
 
 def _status(url: str) -> int:
@@ -99,10 +126,11 @@ def test_site_pages_load_with_their_figures_links_and_3d_views_offline(executed_
     base = served(site)
 
     external, problems, internal_links = [], [], set()
-    plotly_rendered, math_rendered, banners = 0, 0, 0
+    plotly_rendered, math_rendered, banners, stderr_blocks = 0, 0, 0, 0
+    unshipped = _unshipped_notebooks()
     with sync_playwright() as playwright:
         browser = playwright.chromium.launch(executable_path=str(CHROMIUM), args=ARGS)
-        context = browser.new_context()
+        context = browser.new_context(viewport=VIEWPORT)
 
         def only_local(route):
             if route.request.url.startswith(base) or route.request.url.startswith(("data:", "blob:")):
@@ -135,6 +163,20 @@ def test_site_pages_load_with_their_figures_links_and_3d_views_offline(executed_
                     page.wait_for_function(_MATH_RENDERED, timeout=15000)
                     math_rendered += page.evaluate(_MATH_RENDERED)
                 banners += page.get_by_text("executed in reader's mode").count()
+                stderr_blocks += page.evaluate(_STDERR_BLOCKS)
+                figures = page.evaluate(_FIGURES)
+                for shown, natural, column in figures:
+                    if shown < min(natural, column) - 2:
+                        problems.append(f"{name}: a figure shown at {shown:.0f} px of {natural} (column {column:.0f})")
+                if figures:  # a click opens a figure at full size, a second closes it
+                    page.locator(".jp-RenderedImage img").first.click()
+                    if page.locator(".tpvp-zoom img").count() != 1:
+                        problems.append(f"{name}: a click on a figure does not open it at full size")
+                    page.locator(".tpvp-zoom").click()
+                if Path(name).stem not in unshipped and "reduced run" in page.inner_text("body").lower():
+                    problems.append(f"{name}: says 'reduced run' although its rows are shipped")
+            problems.extend(f"{name}: table {header!r} is {width} px wide in a {column} px column"
+                            for header, width, column in page.evaluate(_WIDE_TABLES))
             problems.extend(f"{name}: page error {error}" for error in errors)
         browser.close()
 
@@ -148,3 +190,4 @@ def test_site_pages_load_with_their_figures_links_and_3d_views_offline(executed_
     assert not summary["mathjax"] or math_rendered, "MathJax is shipped but rendered no formula"
     reader = sum(mode != "full" for _, mode in summary["notebooks"])
     assert banners >= reader, "a reader's-mode page lacks its label"
+    assert stderr_blocks == 0, f"{stderr_blocks} blocks of stderr on the notebook pages"

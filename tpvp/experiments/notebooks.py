@@ -31,6 +31,8 @@ from datetime import datetime, timezone
 from pathlib import Path
 
 from tpvp.errors import ConfigError, run_command
+from tpvp.experiments import shipped
+from tpvp.experiments.runner import experiment_cache
 from tpvp.io import atomic_write_bytes, atomic_write_text
 from tpvp.io.publish import staged_folder
 
@@ -58,12 +60,6 @@ def published_results() -> Path:
     return Path(os.environ.get("TPVP_NOTEBOOK_RESULTS") or ROOT / "outputs" / "notebooks")
 
 
-def experiment_cache() -> Path:
-    """The experiments' per-task cache (``$TPVP_EXPERIMENT_CACHE`` or ``outputs/cache``, as the
-    ``tpvp experiments`` commands use from the repository root)."""
-    return Path(os.environ.get("TPVP_EXPERIMENT_CACHE") or ROOT / "outputs" / "cache")
-
-
 # --------------------------------------------------------------------------------------------------
 # results for the tables: full protocol when available, else a labelled reduced run
 # --------------------------------------------------------------------------------------------------
@@ -76,20 +72,22 @@ class ProtocolResults:
     full_protocol: bool
 
 
-def protocol_results(output, name: str, full: bool, run_full, cached_full, run_reduced) -> ProtocolResults:
-    """The raw rows a notebook's tables are made of. ``full``: ``run_full()`` (the paper's
-    protocol; the rows are kept under ``output/results/<name>.parquet`` for ``make notebooks`` to
-    publish). Reader's mode: the full protocol from the experiment cache (``cached_full()``, None
-    unless every task is cached), else from the results ``make notebooks`` published, else
-    ``run_reduced()``, labelled as a reduced run. Never numbers typed in by hand."""
+def protocol_results(output, name: str, full: bool, run_reduced=None) -> ProtocolResults:
+    """The raw rows of protocol ``name`` (:data:`tpvp.experiments.shipped.PROTOCOLS`) that a
+    notebook's tables are made of. ``full``: computed (the experiment cache answers the tasks it
+    holds; the rows are kept under ``output/results/<name>.parquet`` for ``make notebooks`` to
+    publish). Reader's mode: from the experiment cache when it holds every task, else from what
+    ``make notebooks`` published, else the rows shipped with tpvp; ``run_reduced()`` (labelled a
+    reduced run) only where none are shipped. Never numbers typed in by hand."""
     import pandas as pd
 
-    output = Path(output)
+    output, protocol = Path(output), shipped.protocol(name)
+    cache = experiment_cache() / protocol.setting
     if full:
-        raw = run_full()
+        raw = protocol.run(cache)
         atomic_write_bytes(output / "results" / f"{name}.parquet", raw.to_parquet(index=False))
         return ProtocolResults(raw, "the paper's full protocol, computed in this run", True)
-    raw = cached_full()
+    raw = protocol.cached(cache)
     if raw is not None:
         return ProtocolResults(raw, "the paper's full protocol, read from the experiment cache", True)
     published = published_results() / output.name / "results" / f"{name}.parquet"
@@ -97,6 +95,12 @@ def protocol_results(output, name: str, full: bool, run_full, cached_full, run_r
         stamp = datetime.fromtimestamp(published.stat().st_mtime, timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
         return ProtocolResults(pd.read_parquet(published),
                                f"the paper's full protocol, published by `make notebooks` ({stamp})", True)
+    raw = shipped.shipped_rows(name)
+    if raw is not None:
+        return ProtocolResults(raw, f"the paper's full protocol, {shipped.describe(name)}", True)
+    if run_reduced is None:
+        raise ConfigError(f"no rows of protocol {name!r} are shipped: run `python -m tpvp.experiments.shipped "
+                          f"refresh {name}`, or set full = True")
     return ProtocolResults(run_reduced(), "a REDUCED RUN (a few cases, not the paper's protocol): set "
                            "`full = True` or run `make notebooks` for the paper's numbers", False)
 
@@ -137,7 +141,8 @@ def run_notebook(path, full: bool, output, timeout: int | None = None):
     set_parameters(notebook, full, output)
     client = NotebookClient(notebook, timeout=timeout or (FULL_TIMEOUT_S if full else READER_TIMEOUT_S),
                             kernel_name="python3", resources={"metadata": {"path": str(Path(path).parent)}})
-    client.execute()
+    # No progress bars: a static page shows each of their redraws as a line of stderr.
+    client.execute(env={**os.environ, "TQDM_DISABLE": "1"})
     return notebook
 
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 import hashlib
 import importlib
 import json
+import os
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -31,6 +32,12 @@ from tpvp.registry import Registry
 # a refactor keeps every cache. Bump this when a change alters any result (checked with
 # benchmarks/reference_outputs.sh + benchmarks/compare_outputs.py before and after).
 RESULTS_VERSION = 2
+
+
+def experiment_cache() -> Path:
+    """The experiments' per-task cache (``$TPVP_EXPERIMENT_CACHE`` or ``outputs/cache`` of the
+    repository, as the ``tpvp experiments`` commands use from its root)."""
+    return Path(os.environ.get("TPVP_EXPERIMENT_CACHE") or Path(__file__).resolve().parents[2] / "outputs" / "cache")
 
 
 @dataclass(frozen=True)

@@ -37,6 +37,7 @@ from pathlib import Path
 from tpvp.errors import ConfigError, run_command
 from tpvp.experiments.notebooks import (
     MANIFEST,
+    NOTEBOOKS,
     ROOT,
     copy_mathjax,
     mathjax_folder,
@@ -167,20 +168,59 @@ def _first_heading(text: str) -> str | None:
     return match.group(1).strip() if match else None
 
 
-def _mode_banner(entry: dict) -> str | None:
-    """A note at the top of a notebook page saying how it was executed; None for the full protocol."""
+#: What a table's source line says of a reduced run (tpvp.experiments.notebooks.protocol_results).
+REDUCED_MARK = "REDUCED RUN"
+
+
+def _mode_banner(entry: dict, reduced: bool) -> str | None:
+    """A note at the top of a notebook page saying how it was executed: none for the full protocol,
+    a note for reader's mode (its tables from the full protocol's rows), a warning where a table
+    comes from a reduced run."""
     mode = entry.get("mode")
     when = entry.get("executed_utc", "")
     when = f" on {when.replace('T', ' ')[:16]} UTC" if when else ""
     took = f" in {entry['seconds']:.0f} s" if isinstance(entry.get("seconds"), (int, float)) else ""
     if mode == "full":
         return None
+    if mode == "reader" and not reduced:
+        return (f'<div class="admonition note"><p class="admonition-title">This page was executed in reader\'s '
+                f"mode</p><p>With <code>full = False</code>{when}{took}: the paper's tables come from the full "
+                f"protocol's result rows (each table says where its rows come from); the cells that explain a "
+                f"step run on one case. <code>make notebooks</code> runs the whole protocol.</p></div>")
     what = "executed in reader's mode: reduced runs" if mode == "reader" else "executed in an unknown mode"
     return (f'<div class="admonition warning"><p class="admonition-title">This page was {what}</p>'
             f"<p>It shows the notebook as executed with <code>full = False</code>{when}{took}: the "
             f"experiments run on a few cases, not the paper's protocol, unless a table says its rows "
             f"come from the full protocol. <code>make notebooks</code> followed by "
             f"<code>make docs</code> builds the pages from the paper's protocol.</p></div>")
+
+
+def _output_text(cell) -> str:
+    texts = []
+    for output in cell.get("outputs", []):
+        texts.append(str(output.get("text", "")))
+        texts.extend(str(v) for k, v in output.get("data", {}).items() if k.startswith("text/"))
+    return "\n".join(texts)
+
+
+def _title_first(notebook, stored: Path) -> None:
+    """The page's title above its parameters: a first code cell (the parameters) moves below the
+    title, and shows the stored notebook's ``output`` line, not the build machine's path."""
+    import nbformat
+
+    cells = notebook.cells
+    if len(cells) > 1 and cells[0].cell_type == "code" and cells[1].cell_type == "markdown" and \
+            cells[1].source.lstrip().startswith("#"):
+        cells[0], cells[1] = cells[1], cells[0]
+    parameters = next((c for c in cells if c.cell_type == "code"), None)
+    if parameters is None or not stored.is_file():
+        return
+    original = next((c for c in nbformat.read(stored, as_version=4).cells if c.cell_type == "code"), None)
+    stored_output = [line for line in (original.source if original else "").splitlines()
+                     if re.match(r"output\s*=", line)]
+    if stored_output:
+        parameters.source = "\n".join(stored_output[0] if re.match(r"output\s*=", line) else line
+                                      for line in parameters.source.splitlines())
 
 
 def _notebook_page(executed: Path, entry: dict, links: SiteLinks, target: Path) -> str:
@@ -198,9 +238,10 @@ def _notebook_page(executed: Path, entry: dict, links: SiteLinks, target: Path) 
         elif "outputs" in cell:
             cell.outputs = [output for output in cell.outputs
                             if "application/vnd.jupyter.widget-view+json" not in output.get("data", {})]
+    _title_first(notebook, NOTEBOOKS / executed.name)
     first_markdown = next((c for c in notebook.cells if c.cell_type == "markdown"), None)
     title = (_first_heading(first_markdown.source) if first_markdown is not None else None) or executed.stem
-    banner = _mode_banner(entry)
+    banner = _mode_banner(entry, any(REDUCED_MARK in _output_text(cell) for cell in notebook.cells))
     if banner:
         at = 1 if notebook.cells and notebook.cells[0] is first_markdown and \
             first_markdown.source.lstrip().startswith("#") else 0

@@ -42,11 +42,18 @@ def mean_std(table: pd.DataFrame, digits: int = 2) -> pd.DataFrame:
     return table.round(digits + 1)
 
 
+#: The most columns a displayed table has: a wider one is shown in parts (its key columns repeated),
+#: so every table fits a page's column without a sideways scroll.
+MAX_COLUMNS = 8
+
+
 def show_table(frame: pd.DataFrame, csv_path=None, title: str | None = None, *, merge_std: bool = True,
                digits: int = 2) -> None:
     """Write ``frame`` as CSV to ``csv_path`` (atomically; the raw numbers, std columns kept) and
-    display it as a rendered table (mean ± std merged unless ``merge_std=False``). Returns nothing,
-    so a cell ending in ``show_table(...)`` shows the table once."""
+    display it as a rendered table (mean ± std merged unless ``merge_std=False``): a one-row table
+    as quantity-value pairs, a table of more than :data:`MAX_COLUMNS` columns in parts that repeat
+    its key (text) columns, with a link to download the CSV. Returns nothing, so a cell ending in
+    ``show_table(...)`` shows the table once."""
     from IPython.display import Markdown, display
 
     if csv_path is not None:
@@ -54,7 +61,108 @@ def show_table(frame: pd.DataFrame, csv_path=None, title: str | None = None, *, 
     if title:
         display(Markdown(f"**{title}**"))
     shown = mean_std(frame, digits) if merge_std else frame.round(digits + 1)
-    display(shown.style.hide(axis="index").format(precision=digits + 1, na_rep="", escape="html") if len(shown) else shown)
+    for part in table_parts(shown):
+        display(part.style.hide(axis="index").format(precision=digits + 1, na_rep="", escape="html")
+                if len(part) else part)
+    if csv_path is not None and len(frame.columns) > MAX_COLUMNS:
+        display(csv_link(frame, Path(csv_path).name))
+
+
+def table_parts(frame: pd.DataFrame, max_columns: int = MAX_COLUMNS) -> list[pd.DataFrame]:
+    """``frame`` as tables of at most ``max_columns`` columns: one row with more than 4 columns as
+    (quantity, value) rows; more columns than ``max_columns`` as parts that each repeat the leading
+    key columns (text, up to 3)."""
+    if len(frame) == 1 and len(frame.columns) > 4:
+        return [pd.DataFrame({"quantity": [str(c) for c in frame.columns],
+                              "value": [_cell(v) for v in frame.iloc[0]]})]
+    if len(frame.columns) <= max_columns:
+        return [frame]
+    keys = []
+    for column in frame.columns[:3]:
+        if frame[column].dtype != object and not isinstance(frame[column].dtype, pd.StringDtype):
+            break
+        keys.append(column)
+    rest = [c for c in frame.columns if c not in keys]
+    width = max(max_columns - len(keys), 1)
+    return [frame[keys + rest[i:i + width]] for i in range(0, len(rest), width)]
+
+
+def _cell(value) -> str:
+    if isinstance(value, float):
+        return "" if np.isnan(value) else f"{value:.6g}"
+    return str(value)
+
+
+def csv_link(frame: pd.DataFrame, name: str):
+    """A link that downloads ``frame`` as the CSV file ``name`` (the data inside the link: it
+    works in the notebook, its HTML copy and the site, offline)."""
+    import base64
+    import html
+
+    from IPython.display import HTML
+
+    data = base64.b64encode(frame.to_csv(index=False).encode()).decode()
+    return HTML(f'<p class="tpvp-csv"><a download="{html.escape(name)}" href="data:text/csv;base64,{data}">'
+                f"{html.escape(name)}</a>: every column ({len(frame.columns)}) of the {len(frame):,} rows</p>")
+
+
+def paper_comparison(ours: pd.DataFrame, paper: pd.DataFrame, on: list, values: dict, keys: list | None = None,
+                     digits: int = 2, labels: dict | None = None) -> pd.DataFrame:
+    """A paper table as the paper shows it, ours beside theirs, one row per key: the columns
+    ``keys`` (default ``on``, the join keys of :func:`beside_paper`), then per value
+    ``{our column: (the paper's column, header)}`` one column ``"<header>: ours / paper / Δ"`` holding
+    ``"mean ± std / paper / ours - paper"`` rounded to ``digits`` as the paper rounds (``–`` where the
+    paper has no value). ``ours`` holds ``<column>_mean`` and ``<column>_std``, ``paper`` the paper's
+    ``<column>_mean`` (``paper`` None: ``ours`` holds them as ``paper_<the paper's column>``);
+    ``labels`` renames the key columns for display."""
+    merged = ours if paper is None else beside_paper(ours, paper, on=on, values=tuple(n for n, _ in values.values()))
+    table = merged[[k for k in (keys or on) if k in merged]].copy()
+    for key in table.columns:  # keys as they read (a 0.002 m noise level is not 0.00)
+        if pd.api.types.is_float_dtype(table[key]):
+            table[key] = [("" if pd.isna(v) else f"{v:g}") for v in table[key]]
+    for column, (theirs_name, header) in values.items():
+        if f"{column}_mean" not in merged:
+            continue
+        mean = merged[f"{column}_mean"]
+        std = merged[f"{column}_std"] if f"{column}_std" in merged else pd.Series(np.nan, index=merged.index)
+        theirs = merged[f"paper_{theirs_name}"] if f"paper_{theirs_name}" in merged else \
+            pd.Series(np.nan, index=merged.index)
+        cells = []
+        for m, s, p in zip(mean, std, theirs):
+            if pd.isna(m):
+                cells.append("")
+                continue
+            text = f"{m:.{digits}f}" + (f" ± {s:.{digits}f}" if pd.notna(s) else "")
+            cells.append(text + (f" / {p:.{digits}f} / {m - p:+.{digits}f}" if pd.notna(p) else " / – / –"))
+        table[f"{header}: ours / paper / Δ"] = cells
+    return table.rename(columns=labels or {})
+
+
+def show_paper_table(ours: pd.DataFrame, paper: pd.DataFrame, csv_path, title: str, *, on: list, values: dict,
+                     keys: list | None = None, digits: int = 2) -> None:
+    """Show a paper table compactly (:func:`paper_comparison`: ours / paper / Δ per value, the keys'
+    display names from :data:`KEY_LABELS`) and write the wide one (every column, ours and the
+    paper's side by side: :func:`beside_paper`; ``paper`` None: ``ours`` holds the paper's columns)
+    to ``csv_path``, linked under the table."""
+    from IPython.display import Markdown, display
+
+    wide = ours if paper is None else beside_paper(ours, paper, on=on, values=tuple(n for n, _ in values.values()))
+    atomic_write_text(csv_path, wide.to_csv(index=False))
+    display(Markdown(f"**{title}**"))
+    compact = paper_comparison(ours, paper, on, values, keys, digits, KEY_LABELS)
+    for part in table_parts(compact):
+        display(part.style.hide(axis="index").format(precision=digits, na_rep="", escape="html"))
+    display(csv_link(wide, Path(csv_path).name))
+
+
+#: The plants' tables (I-IV): our column -> (the paper's column, header with its unit).
+PLANT_VALUES = {"views": ("views", "views"), "coverage": ("coverage", "coverage (%)"),
+                "path_length_m": ("path", "path (m)")}
+#: Display names of the tables' key columns.
+KEY_LABELS = {"source": "pairs", "view_space": "view space", "species": "species", "method": "method",
+              "budget": "budget", "target": "target", "cases": "cases", "reference": "reference",
+              "cover_resolution_cm": "covering voxel (cm)", "prior": "prior", "sigma_t_m": "σ_t (m)",
+              "sigma_r_deg": "σ_r (°)", "icp": "ICP"}
 
 
 def beside_paper(ours: pd.DataFrame, paper: pd.DataFrame, on: list, values=("views", "coverage", "path"),

@@ -1,0 +1,57 @@
+"""The full-protocol result rows shipped with tpvp (tpvp/data/results): each protocol's file says
+where it comes from, holds every (case, method) of its protocol, and reproduces the numbers the
+README prints, to the printed digit."""
+
+import re
+from pathlib import Path
+
+import pytest
+
+from tpvp.experiments import plants, shipped
+
+ROOT = Path(__file__).resolve().parent.parent
+SHIPPED = [name for name in shipped.PROTOCOLS if shipped.shipped_rows(name) is not None]
+
+
+def _readme_row(label: str) -> str:
+    rows = [line for line in (ROOT / "README.md").read_text().splitlines() if line.startswith(f"| {label} |")]
+    assert len(rows) == 1, label
+    return rows[0].split("|")[2].strip()
+
+
+def _numbers(text: str) -> list[str]:
+    return re.findall(r"\d+\.\d+", text)
+
+
+@pytest.mark.parametrize("name", SHIPPED)
+def test_a_shipped_protocol_holds_every_task_and_says_where_it_comes_from(name):
+    entry = shipped.provenance()[name]
+    assert re.fullmatch(r"[0-9a-f]{40}", entry["commit"]) and entry["command"].endswith(f"refresh {name}")
+    assert entry["date_utc"] and entry["machine"] and entry["rows"] == len(shipped.shipped_rows(name))
+    protocol = shipped.PROTOCOLS[name]
+    rows = shipped.shipped_rows(name)
+    assert set(rows["method"]) == set(protocol.methods)
+    per_method = rows.groupby("method").size()
+    assert (per_method >= len(protocol.cases())).all(), per_method
+    assert "shipped with tpvp, written on" in shipped.describe(name)
+
+
+def test_the_shipped_plant_rows_give_the_readmes_numbers():
+    if shipped.shipped_rows("table1") is None:
+        pytest.skip("Table I's rows are not shipped")
+    tables = plants.tables(shipped.shipped_rows("table1"))
+    table1 = tables["table1_coverage_effort"]
+    generated = table1[(table1["source"] == "generated") & (table1["method"] == "ours")].set_index("view_space")
+    for space, label in (("hemisphere", "plants, hemisphere: Ours (views / coverage / path)"),
+                         ("sphere", "plants, sphere: Ours")):
+        row = generated.loc[space]
+        shown = [f"{row[f'{c}_{s}']:.2f}" for c in ("views", "coverage", "path_length_m") for s in ("mean", "std")]
+        assert _numbers(_readme_row(label)) == shown, (space, shown)
+    ratio = tables["optimum_ratio"]
+    ratio = ratio[(ratio["source"] == "generated") & (ratio["method"] == "ours")].set_index("view_space")
+    shown = [f"{ratio.loc[space, 'views_ratio_mean']:.2f}" for space in ("hemisphere", "sphere")]
+    assert _numbers(_readme_row("plants: Ours' views / the exact optimum's, same coverage")) == shown
+    learned = table1[(table1["source"] == "generated") & (table1["method"] == "ma-scvp")].set_index("view_space")
+    row = learned.loc["hemisphere"]
+    shown = [f"{row[f'{c}_{s}']:.2f}" for c in ("views", "coverage", "path_length_m") for s in ("mean", "std")]
+    assert _numbers(_readme_row("learned MA-SCVP, hemisphere")) == shown
