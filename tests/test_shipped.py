@@ -55,3 +55,32 @@ def test_the_shipped_plant_rows_give_the_readmes_numbers():
     row = learned.loc["hemisphere"]
     shown = [f"{row[f'{c}_{s}']:.2f}" for c in ("views", "coverage", "path_length_m") for s in ("mean", "std")]
     assert _numbers(_readme_row("learned MA-SCVP, hemisphere")) == shown
+
+
+def test_the_shipped_row_rows_give_the_readmes_numbers():
+    from tpvp.experiments import rows
+    from tpvp.experiments.pose_noise import in_paper_units
+
+    if shipped.shipped_rows("tables5_6") is None or shipped.shipped_rows("table7") is None:
+        pytest.skip("the rows' tables are not shipped")
+    table6 = rows.tables(shipped.shipped_rows("tables5_6"))["table6_coverage_effort"]
+
+    def ours(reference, method="ours", cover=4.0):
+        picked = table6[(table6["reference"] == reference) & (table6["method"] == method)]
+        if cover is not None:
+            picked = picked[picked["cover_resolution_cm"] == cover]
+        assert len(picked) == 1, (reference, method)
+        return picked.iloc[0]
+
+    row = ours("handheld")
+    shown = [f"{row['views_mean']:.1f}", f"{row['views_std']:.1f}", f"{row['coverage_mean']:.2f}",
+             f"{row['coverage_std']:.2f}", f"{row['path_length_m_mean']:.1f}", f"{row['path_length_m_std']:.1f}"]
+    assert _numbers(_readme_row("greenhouse rows: Ours at 4 cm, handheld reference")) == shown
+    shown = [f"{ours(r)[c]:.2f}" for r in ("candidates", "complete") for c in ("coverage_mean", "coverage_std")]
+    assert _numbers(_readme_row("rows: the same, candidate-filtered / complete reference")) == shown
+    shown = [f"{ours(r, 'coarse', None)['coverage_mean']:.2f}" for r in ("handheld", "candidates", "complete")]
+    assert _numbers(_readme_row("rows: passive sweep, handheld / candidates / complete reference")) == shown
+    table7 = in_paper_units(rows.tables(shipped.shipped_rows("table7"))["table7_pose_noise"])
+    noisy = table7[(table7["sigma_t_m"] == 0.01) & (table7["sigma_r_deg"] == 2) & (table7["icp"] == "ON")].iloc[0]
+    shown = [f"{noisy['chamfer_mm_mean']:.2f}", f"{noisy['chamfer_mm_std']:.2f}", f"{noisy['f1_10mm_mean']:.1f}"]
+    assert _numbers(_readme_row("rows, pose noise 0.01 m / 2°, with ICP: Chamfer, F1")) == shown

@@ -45,6 +45,10 @@ _FIGURES = """() => { const column = document.querySelector('.md-content__inner'
     return Array.from(document.querySelectorAll('.jp-RenderedImage img'))
         .map(img => [img.getBoundingClientRect().width, img.naturalWidth, column]); }"""
 VIEWPORT = {"width": 1600, "height": 1000}
+# What a notebook page says (its prose and outputs), without the code it shows.
+_SHOWN_TEXT = """() => { const page = document.querySelector('.md-content').cloneNode(true);
+    page.querySelectorAll('.jp-InputArea, .jp-InputPrompt, pre, code').forEach(e => e.remove());
+    return page.innerText; }"""
 
 
 class _QuietHandler(http.server.SimpleHTTPRequestHandler):
@@ -173,7 +177,7 @@ def test_site_pages_load_with_their_figures_links_and_3d_views_offline(executed_
                     if page.locator(".tpvp-zoom img").count() != 1:
                         problems.append(f"{name}: a click on a figure does not open it at full size")
                     page.locator(".tpvp-zoom").click()
-                if Path(name).stem not in unshipped and "reduced run" in page.inner_text("body").lower():
+                if Path(name).stem not in unshipped and "reduced run" in page.evaluate(_SHOWN_TEXT).lower():
                     problems.append(f"{name}: says 'reduced run' although its rows are shipped")
             problems.extend(f"{name}: table {header!r} is {width} px wide in a {column} px column"
                             for header, width, column in page.evaluate(_WIDE_TABLES))
