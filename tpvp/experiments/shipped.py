@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import platform
 import subprocess
 import sys
@@ -127,7 +128,8 @@ def refresh(names=tuple(PROTOCOLS), cache_dir=None, progress: bool = True) -> di
     for name in names:
         protocol(name)  # every name is checked before any work
     entries = provenance()
-    commit, dirty = _git("rev-parse", "HEAD"), bool(_git("status", "--porcelain", "tpvp"))
+    # uncommitted changes to the code (the shipped rows themselves aside)
+    commit, dirty = _git("rev-parse", "HEAD"), bool(_git("status", "--porcelain", "--", "tpvp", ":!tpvp/data/results"))
     for name in names:
         start = time.monotonic()
         table = PROTOCOLS[name].run(cache_dir / PROTOCOLS[name].setting, progress=progress)
@@ -142,8 +144,6 @@ def refresh(names=tuple(PROTOCOLS), cache_dir=None, progress: bool = True) -> di
 
 
 def _cores() -> int:
-    import os
-
     return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
 
 
