@@ -235,16 +235,16 @@ def _session_check(args) -> int:
             problems = Session.problems(args.folder)
             for problem in problems:
                 print(f"left: {problem.line(args.folder)}")
-    if problems:
+        session = None if problems else Session.open(args.folder)
+    if session is None:
         hint = (f"; `tpvp session check {args.folder} --repair` repairs {len(repairable)} of them"
                 if repairable and not args.repair else "")
         print(f"tpvp session check: error: {args.folder}: {len(problems)} problem{'s' * (len(problems) > 1)}{hint}",
               file=sys.stderr)
         return 2
-    session = Session.open(args.folder)
-    plan = session.state.get("plan")
-    print(f"{args.folder}: a {session.kind} session, {len(session.captures)} capture"
-          f"{'s' * (len(session.captures) != 1)}, {'a plan of ' + str(len(plan['planned_views'])) + ' views' if plan else 'no plan yet'}; "
+    plan, captures = session.state.get("plan"), len(session.captures)
+    planned = f"a plan of {len(plan['planned_views'])} views" if plan else "no plan yet"
+    print(f"{args.folder}: a {session.kind} session, {captures} capture{'s' * (captures != 1)}, {planned}; "
           f"no problem found")
     print(session.request().describe())
     _say_late_signals(args, "the folder was repaired")
