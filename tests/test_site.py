@@ -45,6 +45,9 @@ _FIGURES = """() => { const column = document.querySelector('.md-content__inner'
     return Array.from(document.querySelectorAll('.jp-RenderedImage img'))
         .map(img => [img.getBoundingClientRect().width, img.naturalWidth, column]); }"""
 VIEWPORT = {"width": 1600, "height": 1000}
+# Entries of a page's table of contents whose anchor is not on the page.
+_TOC_BROKEN = """() => Array.from(document.querySelectorAll('.md-sidebar--secondary a[href^="#"]'))
+    .filter(a => !document.getElementById(decodeURIComponent(a.hash.slice(1)))).map(a => a.textContent.trim())"""
 # What a notebook page says (its prose and outputs), without the code it shows.
 _SHOWN_TEXT = """() => { const page = document.querySelector('.md-content').cloneNode(true);
     page.querySelectorAll('.jp-InputArea, .jp-InputPrompt, pre, code').forEach(e => e.remove());
@@ -181,6 +184,8 @@ def test_site_pages_load_with_their_figures_links_and_3d_views_offline(executed_
                     problems.append(f"{name}: says 'reduced run' although its rows are shipped")
             problems.extend(f"{name}: table {header!r} is {width} px wide in a {column} px column"
                             for header, width, column in page.evaluate(_WIDE_TABLES))
+            problems.extend(f"{name}: the table of contents' entry {entry!r} links to no heading"
+                            for entry in page.evaluate(_TOC_BROKEN))
             problems.extend(f"{name}: page error {error}" for error in errors)
         browser.close()
 

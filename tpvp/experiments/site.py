@@ -195,6 +195,12 @@ def _mode_banner(entry: dict, reduced: bool) -> str | None:
             f"<code>make docs</code> builds the pages from the paper's protocol.</p></div>")
 
 
+def _plain_headings(markdown: str) -> str:
+    """Headings without inline-code marks: mkdocs-jupyter's table of contents drops a heading's code
+    (its entry would read "A new day: , then plan it" and link to an anchor that does not exist)."""
+    return re.sub(r"(?m)^(#{1,6}\s.*)$", lambda m: m.group(1).replace("`", ""), markdown)
+
+
 def _output_text(cell) -> str:
     texts = []
     for output in cell.get("outputs", []):
@@ -234,7 +240,7 @@ def _notebook_page(executed: Path, entry: dict, links: SiteLinks, target: Path) 
     notebook.metadata.pop("widgets", None)
     for cell in notebook.cells:
         if cell.cell_type == "markdown":
-            cell.source = links.rewrite(cell.source, "notebooks", html=True)
+            cell.source = links.rewrite(_plain_headings(cell.source), "notebooks", html=True)
         elif "outputs" in cell:
             cell.outputs = [output for output in cell.outputs
                             if "application/vnd.jupyter.widget-view+json" not in output.get("data", {})]
