@@ -12,14 +12,13 @@ import re
 import nbformat
 import pytest
 
-from tpvp.experiments import shipped
+from helpers import unshipped_protocols
 from tpvp.experiments.notebooks import notebook_paths, run_notebooks, set_parameters
 
 NOTEBOOKS = notebook_paths()
 LOCAL_PATH = re.compile(r"(/work/|/home/|/tmp/|/root/|[A-Z]:\\\\)")
 # a printed file path standing in for a figure or a table
 PRINTED_FILE = re.compile(r"[\w./-]+\.(png|pdf|svg|csv)\b")
-PROTOCOL = re.compile(r'protocol_results\(\s*output,\s*"(\w+)"')
 
 
 def test_there_is_a_notebook_per_experiment():
@@ -60,8 +59,7 @@ def test_runs_in_reader_mode_and_shows_its_figures_and_tables(path, executed_not
     assert entry["tables"] >= 1, f"{path.name} shows no rendered table"
     executed = nbformat.read(executed_notebooks / f"{path.stem}.ipynb", as_version=4)
     # Its paper tables come from the shipped full-protocol rows: no reduced run where they are shipped.
-    code = "\n".join(cell.source for cell in nbformat.read(path, as_version=4).cells)
-    unshipped = [name for name in PROTOCOL.findall(code) if shipped.shipped_rows(name) is None]
+    unshipped = unshipped_protocols(path)
     for cell in executed.cells:
         for out in cell.get("outputs", []):
             text = out.get("text", "") + out.get("data", {}).get("text/plain", "")

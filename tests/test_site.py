@@ -23,6 +23,8 @@ from pathlib import Path
 
 import pytest
 
+from helpers import unshipped_protocols
+
 CHROMIUM = Path("/usr/bin/chromium")
 ARGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networking", "--disable-component-update",
         "--disable-sync", "--no-first-run"]
@@ -86,18 +88,9 @@ def _has_math(notebook: Path) -> bool:
 
 def _unshipped_notebooks() -> set:
     """Notebooks whose paper tables are not all shipped (tpvp/data/results): they may make a reduced run."""
-    import nbformat
-
-    from tpvp.experiments import shipped
     from tpvp.experiments.notebooks import notebook_paths
 
-    found = set()
-    for path in notebook_paths():
-        code = "\n".join(cell.source for cell in nbformat.read(path, as_version=4).cells)
-        names = re.findall(r'protocol_results\(\s*output,\s*"(\w+)"', code)
-        if any(shipped.shipped_rows(name) is None for name in names):
-            found.add(path.stem)
-    return found
+    return {path.stem for path in notebook_paths() if unshipped_protocols(path)}
 
 
 def _status(url: str) -> int:

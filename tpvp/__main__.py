@@ -90,7 +90,6 @@ def _interrupt(received: list):
     return handler
 
 
-
 def _redeliver(received: list, previous_hook):
     """``sys.unraisablehook`` that raises a signal again whose ``KeyboardInterrupt`` was swallowed
     (raised inside a C callback, e.g. numba's cache loading through ctypes), instead of printing

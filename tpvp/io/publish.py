@@ -51,6 +51,7 @@ from tpvp.io.atomic import fsync_path
 RUN_MARKER = ".tpvp-run.json"
 _HELD = (signal.SIGINT, signal.SIGTERM)
 _WAIT_POLL_S = 0.05
+_ADVICE = "wait for it to finish or choose another folder"  # what a refused run is told to do
 _locks: dict[str, int] = {}  # real path of a destination -> fd of the lock this process holds (hold_folder)
 # The command's step (arm_step): armed, the destination its commit published, signals that came after.
 _step = {"armed": False, "published": None, "signals": []}
@@ -147,7 +148,7 @@ def _check_writable(destination: Path, what: str) -> None:
 
 
 def _lock(destination: Path, what: str, wait: float = 0.0, on_wait=None,
-          advice: str = "wait for it to finish or choose another folder") -> int:
+          advice: str = _ADVICE) -> int:
     """Take ``destination``'s lock, waiting up to ``wait`` seconds for another run to release it
     (``on_wait()`` is called once when it has to wait); :class:`BusyError` after that."""
     lock = _sibling(destination, "lock")
@@ -180,7 +181,7 @@ def _lock_key(destination: Path) -> str:
 
 @contextlib.contextmanager
 def hold_folder(destination, *, what: str = "output folder", wait: float = 0.0, on_wait=None,
-                advice: str = "wait for it to finish or choose another folder") -> Iterator[Path]:
+                advice: str = _ADVICE) -> Iterator[Path]:
     """Hold ``destination``'s lock for the block (waiting up to ``wait`` seconds for another run,
     then :class:`BusyError` with ``advice``), after repairing what a crashed run left: the block
     reads the destination, and :func:`staged_folder` inside it publishes under the same lock, so no

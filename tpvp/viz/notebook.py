@@ -60,10 +60,7 @@ def show_table(frame: pd.DataFrame, csv_path=None, title: str | None = None, *, 
         atomic_write_text(csv_path, frame.to_csv(index=False))
     if title:
         display(Markdown(f"**{title}**"))
-    shown = mean_std(frame, digits) if merge_std else frame.round(digits + 1)
-    for part in table_parts(shown):
-        display(part.style.hide(axis="index").format(precision=digits + 1, na_rep="", escape="html")
-                if len(part) else part)
+    _display_parts(mean_std(frame, digits) if merge_std else frame.round(digits + 1), digits + 1)
     if csv_path is not None and len(frame.columns) > MAX_COLUMNS:
         display(csv_link(frame, Path(csv_path).name))
 
@@ -85,6 +82,15 @@ def table_parts(frame: pd.DataFrame, max_columns: int = MAX_COLUMNS) -> list[pd.
     rest = [c for c in frame.columns if c not in keys]
     width = max(max_columns - len(keys), 1)
     return [frame[keys + rest[i:i + width]] for i in range(0, len(rest), width)]
+
+
+def _display_parts(frame: pd.DataFrame, precision: int) -> None:
+    """Render ``frame`` (:func:`table_parts`: at most :data:`MAX_COLUMNS` columns each)."""
+    from IPython.display import display
+
+    for part in table_parts(frame):
+        display(part.style.hide(axis="index").format(precision=precision, na_rep="", escape="html")
+                if len(part) else part)
 
 
 def _cell(value) -> str:
@@ -149,9 +155,7 @@ def show_paper_table(ours: pd.DataFrame, paper: pd.DataFrame, csv_path, title: s
     wide = ours if paper is None else beside_paper(ours, paper, on=on, values=tuple(n for n, _ in values.values()))
     atomic_write_text(csv_path, wide.to_csv(index=False))
     display(Markdown(f"**{title}**"))
-    compact = paper_comparison(ours, paper, on, values, keys, digits, KEY_LABELS)
-    for part in table_parts(compact):
-        display(part.style.hide(axis="index").format(precision=digits, na_rep="", escape="html"))
+    _display_parts(paper_comparison(wide, None, on, values, keys, digits, KEY_LABELS), digits)
     display(csv_link(wide, Path(csv_path).name))
 
 
