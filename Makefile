@@ -51,7 +51,7 @@ demo: $(STAMP)
 	$(BIN)/tpvp demo --output $(OUT)/demo
 
 test: $(STAMP)
-	$(BIN)/python -m pytest -n 2 --dist loadgroup tests
+	$(BIN)/python -m pytest -n 2 tests
 
 bench: $(STAMP)
 	$(BIN)/python -m pip install --quiet -r benchmarks/requirements.txt
@@ -73,15 +73,12 @@ bench: $(STAMP)
 notebooks: $(STAMP)
 	$(BIN)/python -m tpvp.experiments.notebooks --full --output $(OUT)/notebooks
 
-# The documentation site (README, docs/, the executed notebooks; offline) into $(OUT)/site, built
-# from $(OUT)/notebooks; without $(OUT)/notebooks/manifest.json the notebooks run in reader's mode first.
+# The documentation site (README, docs/, the executed notebooks; offline) into $(OUT)/site. Notebooks
+# that make notebooks published stay; the others are published in reader's mode first, copied from the
+# executions make test keeps (outputs/cache/notebooks) or executed when the notebook or library changed.
 docs: $(STAMP)
 	@start=$$(date +%s); \
-	if [ ! -f $(OUT)/notebooks/manifest.json ]; then \
-	  echo "no $(OUT)/notebooks/manifest.json: running the notebooks in reader's mode first (reduced runs," \
-	       "labelled so on their pages; make notebooks runs the paper's protocol)"; \
-	  $(BIN)/python -m tpvp.experiments.notebooks --output $(OUT)/notebooks || exit $$?; \
-	fi; \
+	$(BIN)/python -m tpvp.experiments.notebooks --keep-full --output $(OUT)/notebooks || exit $$?; \
 	$(BIN)/python -m tpvp.experiments.site --notebooks $(OUT)/notebooks --output $(OUT)/site || exit $$?; \
 	echo "make docs: $$(( $$(date +%s) - start )) s in all; open $(OUT)/site/index.html"
 

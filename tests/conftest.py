@@ -31,12 +31,7 @@ def raw_standin(tmp_path_factory):
 
 @pytest.fixture(scope="session")
 def executed_notebooks(tmp_path_factory):
-    """One folder that the reader's-mode notebook executions publish into (tests/test_notebooks.py)
-    and the site test renders (tests/test_site.py). The notebooks' kernels see an empty experiment
-    cache and no published results, as on a fresh clone, so they make their labelled reduced runs."""
-    import os
-
-    root = tmp_path_factory.mktemp("notebooks")
-    os.environ["TPVP_EXPERIMENT_CACHE"] = str(root / "cache")
-    os.environ["TPVP_NOTEBOOK_RESULTS"] = str(root / "no-published-results")
-    return root / "executed"
+    """One folder per test worker that the reader's-mode notebook executions publish into
+    (tests/test_notebooks.py). The runner gives their kernels an empty experiment cache and no
+    published results, as on a fresh clone."""
+    return tmp_path_factory.mktemp("notebooks") / "executed"

@@ -25,17 +25,3 @@ def benchmark_module(name: str):
     sys.modules[name] = module  # dataclasses look their module up there
     spec.loader.exec_module(module)
     return module
-
-
-def unshipped_protocols(notebook: Path) -> list[str]:
-    """The protocols a stored notebook reads (``protocol_results(output, "NAME", ...)``) whose rows are
-    not shipped (tpvp/data/results): where there are any, the notebook may make a reduced run."""
-    import re
-
-    import nbformat
-
-    from tpvp.experiments import shipped
-
-    code = "\n".join(cell.source for cell in nbformat.read(notebook, as_version=4).cells)
-    return [name for name in re.findall(r'protocol_results\(\s*output,\s*"(\w+)"', code)
-            if shipped.shipped_rows(name) is None]

@@ -34,36 +34,34 @@ def test_full_mode_computes_and_keeps_the_rows_for_make_notebooks(tmp_path, monk
     rows = pd.DataFrame({"views": [3, 4]})
     monkeypatch.setitem(shipped.PROTOCOLS, "table1", _Protocol(run=lambda: rows))
     results = notebooks.protocol_results(tmp_path / "02_x", "table1", True)
-    assert results.full_protocol and results.raw.equals(rows)
+    assert results.raw.equals(rows) and "computed in this run" in results.source
     assert pd.read_parquet(tmp_path / "02_x" / "results" / "table1.parquet").equals(rows)
 
 
 def test_reader_mode_prefers_the_cache_then_the_published_then_the_shipped_rows(tmp_path, monkeypatch):
     monkeypatch.setenv("TPVP_NOTEBOOK_RESULTS", str(tmp_path / "published"))
     monkeypatch.setattr(shipped, "SHIPPED", tmp_path / "shipped")
-    cached, published, shipped_rows, reduced = (pd.DataFrame({"views": [v]}) for v in (1, 2, 3, 4))
+    cached, published, shipped_rows = (pd.DataFrame({"views": [v]}) for v in (1, 2, 3))
     output = tmp_path / "reader" / "02_x"
 
     monkeypatch.setitem(shipped.PROTOCOLS, "table1", _Protocol(cached=lambda: cached))
-    results = notebooks.protocol_results(output, "table1", False, _never)
-    assert results.full_protocol and results.raw.equals(cached) and "cache" in results.source
+    results = notebooks.protocol_results(output, "table1", False)
+    assert results.raw.equals(cached) and "experiment cache" in results.source
 
     monkeypatch.setitem(shipped.PROTOCOLS, "table1", _Protocol(cached=lambda: None))
     with pytest.raises(ConfigError, match="no rows of protocol 'table1' are shipped: run `python -m "
                                           "tpvp.experiments.shipped refresh table1`"):
         notebooks.protocol_results(output, "table1", False)
-    results = notebooks.protocol_results(output, "table1", False, lambda: reduced)
-    assert not results.full_protocol and results.raw.equals(reduced) and "REDUCED" in results.source
 
     (tmp_path / "shipped").mkdir()
     shipped_rows.to_parquet(tmp_path / "shipped" / "table1.parquet")
-    results = notebooks.protocol_results(output, "table1", False, _never)
-    assert results.full_protocol and results.raw.equals(shipped_rows) and "shipped with tpvp" in results.source
+    results = notebooks.protocol_results(output, "table1", False)
+    assert results.raw.equals(shipped_rows) and "shipped with tpvp" in results.source
 
     (tmp_path / "published" / "02_x" / "results").mkdir(parents=True)
     published.to_parquet(tmp_path / "published" / "02_x" / "results" / "table1.parquet")
-    results = notebooks.protocol_results(output, "table1", False, _never)
-    assert results.full_protocol and results.raw.equals(published) and "make notebooks" in results.source
+    results = notebooks.protocol_results(output, "table1", False)
+    assert results.raw.equals(published) and "make notebooks" in results.source
     assert not (output / "results").exists()  # reader's mode never writes rows that look like the protocol's
 
 
@@ -117,6 +115,7 @@ def test_a_failing_notebook_leaves_the_published_copies_whole(tmp_path, monkeypa
     _notebook(folder / "01_ok.ipynb", "from pathlib import Path\nPath(output).mkdir(parents=True)\n"
                                       "(Path(output) / 'x.csv').write_text(str(full))\nprint('shown')")
     monkeypatch.setattr(notebooks, "NOTEBOOKS", folder)
+    monkeypatch.setenv("TPVP_NOTEBOOK_CACHE", str(tmp_path / "kept"))
     destination = tmp_path / "published"
     done = notebooks.run_notebooks(["01_ok"], full=False, destination=destination, progress=False)
     assert done["01_ok"]["mode"] == "reader" and (destination / "01_ok" / "x.csv").read_text() == "False"
@@ -132,3 +131,38 @@ def test_a_failing_notebook_leaves_the_published_copies_whole(tmp_path, monkeypa
     assert after == before  # the first notebook's new copy was not published either
     assert json.loads((destination / "manifest.json").read_text())["01_ok"]["mode"] == "reader"
     assert [p.name for p in tmp_path.iterdir() if "staging" in p.name] == []
+
+
+@pytest.mark.slow
+def test_a_kept_reader_execution_is_reused_until_the_notebook_or_the_library_changes(tmp_path, monkeypatch):
+    folder = tmp_path / "notebooks"
+    folder.mkdir()
+    # what the kernel sees: the runner's fresh experiment cache, not the caller's
+    _notebook(folder / "01_ok.ipynb", "import os\nfrom pathlib import Path\nPath(output).mkdir(parents=True)\n"
+                                      "(Path(output) / 'x.csv').write_text('1')\n"
+                                      "print(os.environ['TPVP_EXPERIMENT_CACHE'].startswith(os.environ['CALLER']))")
+    monkeypatch.setattr(notebooks, "NOTEBOOKS", folder)
+    monkeypatch.setenv("TPVP_NOTEBOOK_CACHE", str(tmp_path / "kept"))
+    monkeypatch.setenv("TPVP_EXPERIMENT_CACHE", str(tmp_path / "caller-cache"))
+    monkeypatch.setenv("CALLER", str(tmp_path / "caller-cache"))
+    first = notebooks.run_notebooks(["01_ok"], destination=tmp_path / "a", progress=False)["01_ok"]
+    assert "reused_utc" not in first
+    assert nbformat.read(tmp_path / "a" / "01_ok.ipynb", as_version=4).cells[1].outputs[0]["text"] == "False\n"
+    key = notebooks.execution_key(folder / "01_ok.ipynb")
+    kept = lambda: [p.name for p in (tmp_path / "kept" / "01_ok").iterdir() if not p.name.startswith(".")]  # noqa: E731
+    assert kept() == [key]
+
+    again = notebooks.run_notebooks(["01_ok"], destination=tmp_path / "b", progress=False)["01_ok"]
+    assert "reused_utc" in again and again["executed_utc"] == first["executed_utc"]
+    reused = (tmp_path / "b" / "01_ok.ipynb").read_text()
+    assert str(tmp_path / "b" / "01_ok") in reused and str(tmp_path / "a") not in reused
+    assert notebooks.FOLDER_TOKEN not in reused + (tmp_path / "b" / "01_ok.html").read_text()
+    assert (tmp_path / "b" / "01_ok" / "x.csv").read_text() == "1"
+
+    # executed when asked to, and again once the notebook changes; the older execution is dropped
+    forced = notebooks.run_notebooks(["01_ok"], destination=tmp_path / "b", progress=False, reuse=False)["01_ok"]
+    assert "reused_utc" not in forced
+    _notebook(folder / "01_ok.ipynb", "print('changed')")
+    changed = notebooks.run_notebooks(["01_ok"], destination=tmp_path / "b", progress=False)["01_ok"]
+    assert "reused_utc" not in changed and not (tmp_path / "b" / "01_ok" / "x.csv").exists()
+    assert kept() == [notebooks.execution_key(folder / "01_ok.ipynb")]

@@ -48,6 +48,22 @@ def test_plot_coverage_draws_all_classes(tmp_path):
     assert not list(tmp_path.glob(".*tmp*"))  # atomic writes leave no temporary files
 
 
+def test_a_paper_figure_draws_its_point_clouds_as_images_in_the_pdf(tmp_path):
+    import matplotlib.pyplot as plt
+
+    from tpvp.viz.figures import RASTER_POINTS, _save
+
+    fig = plt.figure()
+    ax = fig.add_subplot(projection="3d")
+    cloud = ax.scatter(*np.random.default_rng(0).random((RASTER_POINTS + 1, 3)).T, s=1)
+    marks = ax.scatter([0, 1], [0, 1], [0, 1], s=30)
+    _save(fig, tmp_path / "f.png", vector=True)
+    assert cloud.get_rasterized() and not marks.get_rasterized()
+    pdf = (tmp_path / "f.pdf").read_bytes()
+    assert pdf.startswith(b"%PDF") and b"/Image" in pdf  # the cloud, embedded as one image
+    assert (tmp_path / "f.png").read_bytes().startswith(PNG_SIGNATURE)
+
+
 def test_plot_plan_old_and_new_keywords(tmp_path):
     from tpvp.viz import plot_plan
 

@@ -8,6 +8,7 @@ from tpvp.config import make_config
 from tpvp.errors import ConfigError, InputFileError
 from tpvp import parallel
 from tpvp.experiments import plants, runner
+from tpvp.experiments.comparison import compare_methods
 
 CONFIG = make_config("plant", {"registration.embedded_deformation.iterations": 20})
 
@@ -69,12 +70,27 @@ def test_results_folder_holds_tables_figures_and_the_comparison(raw, tiny_cases,
                  "figures/views_per_species_generated.png", "comparison/comparison.png", "comparison/comparison.rrd"):
         assert (out / name).is_file() and (out / name).stat().st_size > 0, name
     compared = pd.read_csv(out / "comparison" / "comparison.csv")
-    assert list(compared["method"]) == ["gmc", "ours", "optimum"]
+    assert list(compared["method"]) == ["gmc", "ours", "optimum"]  # 12 views: no MA-SCVP
     assert compared["views"].nunique() == 1  # a matched view count
     for row in compared.itertuples():
         assert int(row.order.split()[0]) == case.initial_view  # the same initial view
     # nothing with that many views sees more than the optimum
     assert compared["coverage"].max() == pytest.approx(compared.set_index("method").loc["optimum", "coverage"])
+
+
+def test_the_comparison_shows_ma_scvp_on_its_32_views():
+    case = plants.case_list(plants.generated_instances(seeds=(0,), species=("maize",)), view_spaces=("sphere",),
+                            rotations=(0.0,), initial_views=(17,))[0]
+    config = case.config(CONFIG)
+    plans = {p.method: p for p in compare_methods(plants.case_scene(case, config), config)}
+    assert list(plans) == ["gmc", "ma-scvp", "ours", "optimum"]
+    learned = plans["ma-scvp"]
+    assert learned.order[0] == 17 and all(0 <= v < 32 for v in learned.order)  # the sphere's first 32 views only
+    assert len(set(learned.order)) == len(learned.order) and 0 < learned.coverage <= 1
+    assert len({len(p.order) for m, p in plans.items() if m != "ma-scvp"}) == 1  # matched: Ours' count
+    # nothing with as many views sees more than the optimum
+    optimum = plans["optimum"]
+    assert max(p.coverage for p in plans.values() if len(p.order) <= len(optimum.order)) == pytest.approx(optimum.coverage)
 
 
 def test_the_cache_is_reused_and_an_interrupted_run_resumes(raw, tiny_cases, monkeypatch):

@@ -288,3 +288,26 @@ def test_config_command_prints_every_row_setting(capsys):
     printed = capsys.readouterr().out
     for section in ("protocol:", "pose_noise:", "blockwise:", "pose_noise.seed = seed"):
         assert section in printed
+
+
+def test_passive_fields_of_view_meet_the_mid_plane_where_the_pinhole_puts_them(tmp_path):
+    from types import SimpleNamespace
+
+    from tpvp.scene.boxes import OrientedBox
+    from tpvp.sensor.camera import D435
+    from tpvp.viz.rows import field_of_view_footprints, plot_passive_sweep
+
+    box = OrientedBox(np.zeros(3), np.eye(3), np.array([2.0, 0.6, 2.0]))
+    room = SimpleNamespace(plant_box=box, view_box=OrientedBox(np.array([0.0, -1.0, 0.0]), np.eye(3), np.ones(3)),
+                           initial_positions=np.array([[0.3, -1.5, 0.2], [0.0, -1.0, 0.0]]),
+                           initial_look_ats=np.array([[0.3, 0.0, 0.2], [0.0, 0.0, 5.0]]))
+    footprints = field_of_view_footprints(room, D435)
+    # looking straight across from 1.5 m: image corner (u, v) lands at depth 1.5 along x right, y down
+    expected = [[0.3 + 1.5 * (u - D435.cx) / D435.fx, 0.0, 0.2 - 1.5 * (v - D435.cy) / D435.fy]
+                for u, v in ((0, 0), (D435.width, 0), (D435.width, D435.height), (0, D435.height))]
+    np.testing.assert_allclose(footprints[0], expected, atol=1e-12)
+    # a camera looking steeply up: the rays of its lower image corners still reach the plane
+    assert np.isfinite(footprints[1][2:]).all() and (footprints[1][2:, 1] == pytest.approx(0.0))
+    room.initial_positions, room.initial_look_ats = room.initial_positions[:1], room.initial_look_ats[:1]
+    assert plot_passive_sweep(tmp_path / "sweep.png", room, np.random.default_rng(0).random((50, 3)) - 0.5,
+                              D435).stat().st_size > 0

@@ -1,9 +1,12 @@
-"""The paper's comparison figure: one case, the same initial view, GMC, Ours and the exact optimum at
-a matched view count (Ours' count: its initial view and warm-up NBV included).
+"""The paper's comparison figure: one case, the same initial view, GMC, MA-SCVP, Ours and the exact
+optimum at a matched view count (Ours' count: its initial view and warm-up NBV included).
 
 * **Ours**: :func:`tpvp.experiments.single_plant.run_case`;
 * **GMC**: the sequential NBV curve (:func:`tpvp.experiments.baselines.nbv_curve`) stopped at the
   same number of views, moves in execution order with the obstacle radius known at each move;
+* **MA-SCVP**: the learned one-shot view set after one PC-NBV view
+  (:func:`tpvp.learning.methods.learned_one_shot`), with as many views as it predicts (as in the
+  paper, where it predicts as many as Ours); it knows the 32 hemisphere views only;
 * **optimum**: the most oracle voxels any set of that many views (initial view included) sees
   (:func:`tpvp.setcover.maxcover.max_coverage` on the ground truth), in its shortest open path from
   the initial view.
@@ -20,9 +23,11 @@ from pathlib import Path
 import numpy as np
 from scipy import sparse
 
-from tpvp.config import PlantConfig
+from tpvp.config import PlantConfig, with_overrides
 from tpvp.experiments.baselines import nbv_curve
 from tpvp.experiments.single_plant import Scene, run_case
+from tpvp.learning.methods import learned_one_shot
+from tpvp.learning.dataset import VIEWS as LEARNED_VIEWS
 from tpvp.path.local import local_path_lengths, local_path_points, obstacle_radius
 from tpvp.path.tsp import shortest_open_path
 from tpvp.setcover.maxcover import max_coverage
@@ -64,8 +69,8 @@ def _plan(scene: Scene, method: str, order, path_length, radii, note="") -> Comp
 
 
 def compare_methods(scene: Scene, config: PlantConfig, views: int | None = None) -> list[ComparedPlan]:
-    """GMC, Ours and the exact optimum on one case with ``views`` views each (default: as many as
-    Ours uses)."""
+    """GMC, MA-SCVP (where the view space holds its 32 views), Ours and the exact optimum on one
+    case with ``views`` views each (default: as many as Ours uses; MA-SCVP: as many as it predicts)."""
     centre = np.zeros(3)
     ours = run_case(scene, config)
     order = ours.order
@@ -77,6 +82,12 @@ def compare_methods(scene: Scene, config: PlantConfig, views: int | None = None)
     curve = nbv_curve(scene, config, max_views=views)
     plans.insert(0, _plan(scene, "gmc", curve["view"].tolist(), curve["path_length"].iloc[-1],
                           curve["radius"].iloc[1:].tolist(), "sequential NBV, execution order"))
+    if len(scene.view_space) >= LEARNED_VIEWS:
+        learned = learned_one_shot(scene, with_overrides(config, {"nbv.method": "pc-nbv", "nbv.warm_up_views": 1}))
+        order = [*learned["executed_views"], *learned["planned_order"]]
+        plans.insert(1, _plan(scene, "ma-scvp", order, learned["path_length_m"],
+                              [learned["obstacle_radius"]] * (len(order) - 1),
+                              f"1 PC-NBV view + {learned['planned_views']} predicted"))
 
     initial = scene.view_space.view_index(config.initial_view)
     oracle = np.asarray(scene.oracle)
@@ -94,7 +105,7 @@ def compare_methods(scene: Scene, config: PlantConfig, views: int | None = None)
 
 
 def write_comparison(folder, scene: Scene, config: PlantConfig, views: int | None = None, title: str = "") -> dict:
-    """The comparison figure (PNG), a table of the three plans (CSV) and a rerun recording, written
+    """The comparison figure (PNG), a table of the plans (CSV) and a rerun recording, written
     into ``folder`` as one published folder."""
     with staged_folder(folder) as stage:
         written = write_comparison_files(stage.folder, scene, config, views, title)
@@ -117,7 +128,7 @@ def write_comparison_files(folder, scene: Scene, config: PlantConfig, views: int
                           for p in plans])
     atomic_write_text(folder / "comparison.csv", table.to_csv(index=False))
     figure = plot_method_comparison(folder / "comparison.png", scene, plans, title)
-    colours = {"gmc": (40, 90, 220), "ours": (220, 40, 40), "optimum": (30, 30, 30)}
+    colours = {"gmc": (40, 90, 220), "ma-scvp": (230, 150, 20), "ours": (220, 40, 40), "optimum": (30, 30, 30)}
     recording = write_recording(
         folder / "comparison.rrd", clouds={"current_truth": (scene.current, (120, 120, 120))},
         cameras={f"{p.method}_views": (space.positions[p.order], space.look_ats[p.order]) for p in plans},

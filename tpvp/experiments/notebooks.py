@@ -13,11 +13,19 @@ runs the full protocol) executes each notebook with its parameters cell set (``f
 
 An interrupted run leaves the previous folder whole; running a subset keeps the other notebooks'
 copies. The stored notebooks under ``notebooks/`` stay free of outputs and local paths.
+
+Reader's mode runs as on a fresh clone (an empty experiment cache, nothing published: the paper
+tables come from the shipped rows), so its execution depends only on the notebook and the
+library. Each one is kept in ``outputs/cache/notebooks/`` (:func:`execution_cache`) under a key
+of the notebook, the library's sources and data and ``environment.txt``; a later reader's-mode
+run with the same key reuses it instead of executing (``make test`` runs every notebook, so the
+``make docs`` after it only copies them).
 """
 
 from __future__ import annotations
 
 import argparse
+import hashlib
 import html
 import importlib.util
 import json
@@ -25,12 +33,13 @@ import os
 import re
 import shutil
 import sys
+import tempfile
 import time
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
 
-from tpvp.errors import ConfigError, run_command
+from tpvp.errors import BusyError, ConfigError, run_command
 from tpvp.experiments import shipped
 from tpvp.experiments.runner import experiment_cache
 from tpvp.io import atomic_write_bytes, atomic_write_text
@@ -40,6 +49,9 @@ ROOT = Path(__file__).resolve().parent.parent.parent
 NOTEBOOKS = ROOT / "notebooks"
 MANIFEST = "manifest.json"
 MATHJAX = "mathjax"  # folder beside the HTML copies
+EXECUTION = "execution.json"  # in a cached execution: its manifest entry
+# Stands for the publishing folder in a cached execution's texts (the folder differs between runs).
+FOLDER_TOKEN = "@TPVP-NOTEBOOK-FOLDER@"
 FULL_TIMEOUT_S = 3 * 3600  # per cell; the longest full-protocol cell takes about 15 min on 2 cores
 READER_TIMEOUT_S = 600
 
@@ -61,7 +73,7 @@ def published_results() -> Path:
 
 
 # --------------------------------------------------------------------------------------------------
-# results for the tables: full protocol when available, else a labelled reduced run
+# results for the tables: always the full protocol's rows
 # --------------------------------------------------------------------------------------------------
 
 
@@ -69,16 +81,14 @@ def published_results() -> Path:
 class ProtocolResults:
     raw: object  # pandas.DataFrame
     source: str  # where the rows come from, in words (shown above the tables)
-    full_protocol: bool
 
 
-def protocol_results(output, name: str, full: bool, run_reduced=None) -> ProtocolResults:
+def protocol_results(output, name: str, full: bool) -> ProtocolResults:
     """The raw rows of protocol ``name`` (:data:`tpvp.experiments.shipped.PROTOCOLS`) that a
     notebook's tables are made of. ``full``: computed (the experiment cache answers the tasks it
     holds; the rows are kept under ``output/results/<name>.parquet`` for ``make notebooks`` to
     publish). Reader's mode: from the experiment cache when it holds every task, else from what
-    ``make notebooks`` published, else the rows shipped with tpvp; ``run_reduced()`` (labelled a
-    reduced run) only where none are shipped. Never numbers typed in by hand."""
+    ``make notebooks`` published, else the rows shipped with tpvp. Never numbers typed in by hand."""
     import pandas as pd
 
     output, protocol = Path(output), shipped.protocol(name)
@@ -86,31 +96,27 @@ def protocol_results(output, name: str, full: bool, run_reduced=None) -> Protoco
     if full:
         raw = protocol.run(cache)
         atomic_write_bytes(output / "results" / f"{name}.parquet", raw.to_parquet(index=False))
-        return ProtocolResults(raw, "the paper's full protocol, computed in this run", True)
+        return ProtocolResults(raw, "the paper's full protocol, computed in this run")
     raw = protocol.cached(cache)
     if raw is not None:
-        return ProtocolResults(raw, "the paper's full protocol, read from the experiment cache", True)
+        return ProtocolResults(raw, "the paper's full protocol, read from the experiment cache")
     published = published_results() / output.name / "results" / f"{name}.parquet"
     if published.is_file():
         stamp = datetime.fromtimestamp(published.stat().st_mtime, timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
         return ProtocolResults(pd.read_parquet(published),
-                               f"the paper's full protocol, published by `make notebooks` ({stamp})", True)
+                               f"the paper's full protocol, published by `make notebooks` ({stamp})")
     raw = shipped.shipped_rows(name)
-    if raw is not None:
-        return ProtocolResults(raw, f"the paper's full protocol, {shipped.describe(name)}", True)
-    if run_reduced is None:
+    if raw is None:
         raise ConfigError(f"no rows of protocol {name!r} are shipped: run `python -m tpvp.experiments.shipped "
                           f"refresh {name}`, or set full = True")
-    return ProtocolResults(run_reduced(), "a REDUCED RUN (a few cases, not the paper's protocol): set "
-                           "`full = True` or run `make notebooks` for the paper's numbers", False)
+    return ProtocolResults(raw, f"the paper's full protocol, {shipped.describe(name)}")
 
 
 def show_source(results: ProtocolResults) -> None:
     """One line above a table saying where its rows come from."""
     from IPython.display import Markdown, display
 
-    marker = "" if results.full_protocol else "⚠️ "
-    display(Markdown(f"{marker}Rows: {results.source}; {len(results.raw)} raw rows."))
+    display(Markdown(f"Rows: {results.source}; {len(results.raw)} raw rows."))
 
 
 # --------------------------------------------------------------------------------------------------
@@ -130,10 +136,10 @@ def set_parameters(notebook, full: bool, output) -> None:
     first.source = source
 
 
-def run_notebook(path, full: bool, output, timeout: int | None = None):
+def run_notebook(path, full: bool, output, timeout: int | None = None, env=None):
     """Execute one notebook (kernel ``python3``, working folder ``notebooks/`` as in JupyterLab)
-    with its parameters set; raises ``nbclient.exceptions.CellExecutionError`` on a cell error.
-    Returns the executed notebook."""
+    with its parameters set and ``env`` added to the kernel's environment; raises
+    ``nbclient.exceptions.CellExecutionError`` on a cell error. Returns the executed notebook."""
     import nbformat
     from nbclient import NotebookClient
 
@@ -142,8 +148,54 @@ def run_notebook(path, full: bool, output, timeout: int | None = None):
     client = NotebookClient(notebook, timeout=timeout or (FULL_TIMEOUT_S if full else READER_TIMEOUT_S),
                             kernel_name="python3", resources={"metadata": {"path": str(Path(path).parent)}})
     # No progress bars: a static page shows each of their redraws as a line of stderr.
-    client.execute(env={**os.environ, "TQDM_DISABLE": "1"})
+    client.execute(env={**os.environ, **(env or {}), "TQDM_DISABLE": "1"})
     return notebook
+
+
+# --------------------------------------------------------------------------------------------------
+# reader's-mode executions, kept for reuse
+# --------------------------------------------------------------------------------------------------
+
+
+def execution_cache() -> Path:
+    """Where reader's-mode executions are kept (``$TPVP_NOTEBOOK_CACHE`` or ``outputs/cache/notebooks``)."""
+    return Path(os.environ.get("TPVP_NOTEBOOK_CACHE") or ROOT / "outputs" / "cache" / "notebooks")
+
+
+def execution_key(path) -> str:
+    """What a reader's-mode execution of notebook ``path`` depends on: the notebook, every file of
+    the library (``tpvp/``, its shipped data and results included, and ``data_tools/``) and the
+    environment it was installed from. Compiled files and caches are left out."""
+    digest = hashlib.sha256(Path(path).read_bytes())
+    files = [f for folder in ("tpvp", "data_tools") for f in (ROOT / folder).rglob("*")
+             if f.is_file() and "__pycache__" not in f.parts and f.suffix != ".pyc"]
+    for file in sorted([*files, ROOT / "environment.txt"]):
+        if file.is_file():
+            digest.update(file.relative_to(ROOT).as_posix().encode() + b"\0" + file.read_bytes())
+    return digest.hexdigest()[:16]
+
+
+def _cached_execution(stem: str, key: str) -> Path | None:
+    folder = execution_cache() / stem / key
+    return folder if (folder / EXECUTION).is_file() else None
+
+
+def _keep_execution(stem: str, key: str, notebook_text: str, page: str, exported: Path, entry: dict) -> None:
+    """Keep one execution (texts with :data:`FOLDER_TOKEN` for the publishing folder) and drop the
+    notebook's older ones."""
+    folder = execution_cache() / stem / key
+    try:
+        with staged_folder(folder, what="notebook execution cache") as stage:
+            atomic_write_text(stage.path(f"{stem}.ipynb"), notebook_text)
+            atomic_write_text(stage.path(f"{stem}.html"), page)
+            if exported.is_dir():
+                shutil.copytree(exported, stage.folder / stem)
+            atomic_write_text(stage.path(EXECUTION), json.dumps(entry, indent=1) + "\n")
+    except BusyError:
+        return  # another run is keeping the same execution (same key: the same notebook and library)
+    for old in (execution_cache() / stem).iterdir():
+        if old.name != key and not old.name.startswith("."):
+            shutil.rmtree(old, ignore_errors=True)
 
 
 def mathjax_folder() -> Path | None:
@@ -217,34 +269,52 @@ def _index_page(manifest: dict) -> str:
 
 
 def run_notebooks(names=(), full: bool = False, destination=None, timeout: int | None = None,
-                  progress: bool = True) -> dict:
+                  progress: bool = True, reuse: bool = True) -> dict:
     """Execute the notebooks and publish them (see the module docstring) under ``destination``
-    (default :func:`published_results`). Returns the manifest entries of this run."""
+    (default :func:`published_results`). Reader's mode keeps each execution and, with ``reuse``,
+    copies a kept one whose key matches instead of executing. Returns the manifest entries of this run."""
     import nbformat
 
     paths = notebook_paths(names)
     destination = Path(destination or published_results()).absolute()
     mode = "full" if full else "reader"
     done = {}
-    with staged_folder(destination, keep_existing=True, what="notebook output folder") as stage:
+    with staged_folder(destination, keep_existing=True, what="notebook output folder") as stage, \
+            tempfile.TemporaryDirectory(prefix="tpvp-reader-") as fresh:
+        # reader's mode as on a fresh clone: nothing computed before, nothing published
+        env = {} if full else {"TPVP_EXPERIMENT_CACHE": str(Path(fresh) / "cache"),
+                               "TPVP_NOTEBOOK_RESULTS": str(Path(fresh) / "published")}
         manifest_path = stage.folder / MANIFEST
         manifest = json.loads(manifest_path.read_text()) if manifest_path.is_file() else {}
         for path in paths:
-            if progress:
-                print(f"running {path.name} ({mode} mode) ...", flush=True)
             output = stage.folder / path.stem
             shutil.rmtree(output, ignore_errors=True)  # hard links of the old copy: the published one stays
-            start = time.perf_counter()
-            notebook = run_notebook(path, full, output, timeout)
-            seconds = time.perf_counter() - start
-            _replace_paths(notebook, str(stage.folder), str(destination))
-            atomic_write_text(stage.path(f"{path.stem}.ipynb"), nbformat.writes(notebook))
-            atomic_write_text(stage.path(f"{path.stem}.html"), html_copy(notebook))
-            done[path.stem] = {"mode": mode, "seconds": round(seconds, 1), **output_counts(notebook),
-                               "executed_utc": datetime.now(timezone.utc).isoformat(timespec="seconds")}
+            key = None if full else execution_key(path)
+            kept = _cached_execution(path.stem, key) if key and reuse else None
+            if kept is not None:
+                entry = json.loads((kept / EXECUTION).read_text())
+                notebook_text, page = ((kept / f"{path.stem}.{ext}").read_text() for ext in ("ipynb", "html"))
+                if (kept / path.stem).is_dir():
+                    shutil.copytree(kept / path.stem, output)
+                entry["reused_utc"] = datetime.now(timezone.utc).isoformat(timespec="seconds")
+            else:
+                if progress:
+                    print(f"running {path.name} ({mode} mode) ...", flush=True)
+                start = time.perf_counter()
+                notebook = run_notebook(path, full, output, timeout, env)
+                seconds = time.perf_counter() - start
+                _replace_paths(notebook, str(stage.folder), FOLDER_TOKEN)
+                notebook_text, page = nbformat.writes(notebook), html_copy(notebook)
+                entry = {"mode": mode, "seconds": round(seconds, 1), **output_counts(notebook),
+                         "executed_utc": datetime.now(timezone.utc).isoformat(timespec="seconds")}
+                if key:
+                    _keep_execution(path.stem, key, notebook_text, page, output, entry)
+            atomic_write_text(stage.path(f"{path.stem}.ipynb"), notebook_text.replace(FOLDER_TOKEN, str(destination)))
+            atomic_write_text(stage.path(f"{path.stem}.html"), page.replace(FOLDER_TOKEN, str(destination)))
+            done[path.stem] = entry
             if progress:
-                print(f"  {path.stem}: {seconds:.0f} s, {done[path.stem]['images']} figures, "
-                      f"{done[path.stem]['tables']} tables", flush=True)
+                how = "kept execution of " + entry["executed_utc"][:16] if kept is not None else f"{entry['seconds']:.0f} s"
+                print(f"  {path.stem}: {how}, {entry['images']} figures, {entry['tables']} tables", flush=True)
         mathjax = mathjax_folder()
         if mathjax is not None and not (stage.folder / MATHJAX / "MathJax.js").is_file():
             copy_mathjax(mathjax, stage.folder / MATHJAX)
@@ -260,9 +330,24 @@ def main(argv=None) -> int:
     parser.add_argument("--full", action="store_true",
                         help="the paper's full protocol (make notebooks; about an hour on 2 cores with cold caches)")
     parser.add_argument("--output", default=None, help="publish here (default: outputs/notebooks in the repository)")
+    parser.add_argument("--keep-full", action="store_true",
+                        help="keep the published full-protocol copies; run the others in reader's mode (make docs)")
+    parser.add_argument("--no-reuse", dest="reuse", action="store_false",
+                        help="execute every notebook, even one whose reader's-mode execution is kept")
     args = parser.parse_args(argv)
 
-    args.func = lambda a: run_notebooks(a.names, a.full, a.output) and 0
+    def run(args) -> int:
+        names = args.names
+        if args.keep_full:
+            manifest_path = Path(args.output or published_results()) / MANIFEST
+            manifest = json.loads(manifest_path.read_text()) if manifest_path.is_file() else {}
+            names = [p.stem for p in notebook_paths(names) if manifest.get(p.stem, {}).get("mode") != "full"]
+            if not names:
+                print("every notebook's published copy is a full-protocol execution; kept")
+                return 0
+        run_notebooks(names, args.full, args.output, reuse=args.reuse)
+        return 0
+    args.func = run
     return run_command(args, "notebooks")
 
 

@@ -279,6 +279,7 @@ def _learned(labels: str):
         # the published system: one PC-NBV view before the network
         config = with_overrides(config, {"nbv.method": "pc-nbv", "nbv.warm_up_views": 1})
         row = learned_one_shot(scene, config, labels)
+        del row["planned_order"], row["obstacle_radius"]
         return [{**row, **warm_up_rank(scene, row.pop("executed_views"))}]
     return method
 

@@ -168,45 +168,30 @@ def _first_heading(text: str) -> str | None:
     return match.group(1).strip() if match else None
 
 
-#: What a table's source line says of a reduced run (tpvp.experiments.notebooks.protocol_results).
-REDUCED_MARK = "REDUCED RUN"
-
-
-def _mode_banner(entry: dict, reduced: bool) -> str | None:
+def _mode_banner(entry: dict) -> str | None:
     """A note at the top of a notebook page saying how it was executed: none for the full protocol,
-    a note for reader's mode (its tables from the full protocol's rows), a warning where a table
-    comes from a reduced run."""
+    a note for reader's mode (its tables from the full protocol's rows), a warning for an unknown mode."""
     mode = entry.get("mode")
     when = entry.get("executed_utc", "")
     when = f" on {when.replace('T', ' ')[:16]} UTC" if when else ""
     took = f" in {entry['seconds']:.0f} s" if isinstance(entry.get("seconds"), (int, float)) else ""
     if mode == "full":
         return None
-    if mode == "reader" and not reduced:
+    if mode == "reader":
         return (f'<div class="admonition note"><p class="admonition-title">This page was executed in reader\'s '
                 f"mode</p><p>With <code>full = False</code>{when}{took}: the paper's tables come from the full "
                 f"protocol's result rows (each table says where its rows come from); the cells that explain a "
                 f"step run on one case. <code>make notebooks</code> runs the whole protocol.</p></div>")
-    what = "executed in reader's mode: reduced runs" if mode == "reader" else "executed in an unknown mode"
-    return (f'<div class="admonition warning"><p class="admonition-title">This page was {what}</p>'
-            f"<p>It shows the notebook as executed with <code>full = False</code>{when}{took}: the "
-            f"experiments run on a few cases, not the paper's protocol, unless a table says its rows "
-            f"come from the full protocol. <code>make notebooks</code> followed by "
-            f"<code>make docs</code> builds the pages from the paper's protocol.</p></div>")
+    return (f'<div class="admonition warning"><p class="admonition-title">This page was executed in an unknown '
+            f"mode</p><p>Its manifest entry says neither reader's mode nor the full protocol{when}{took}. "
+            f"<code>make notebooks</code> followed by <code>make docs</code> builds the pages from the "
+            f"paper's protocol.</p></div>")
 
 
 def _plain_headings(markdown: str) -> str:
     """Headings without inline-code marks: mkdocs-jupyter's table of contents drops a heading's code
     (its entry would read "A new day: , then plan it" and link to an anchor that does not exist)."""
     return re.sub(r"(?m)^(#{1,6}\s.*)$", lambda m: m.group(1).replace("`", ""), markdown)
-
-
-def _output_text(cell) -> str:
-    texts = []
-    for output in cell.get("outputs", []):
-        texts.append(str(output.get("text", "")))
-        texts.extend(str(v) for k, v in output.get("data", {}).items() if k.startswith("text/"))
-    return "\n".join(texts)
 
 
 def _title_first(notebook, stored: Path) -> None:
@@ -247,7 +232,7 @@ def _notebook_page(executed: Path, entry: dict, links: SiteLinks, target: Path) 
     _title_first(notebook, NOTEBOOKS / executed.name)
     first_markdown = next((c for c in notebook.cells if c.cell_type == "markdown"), None)
     title = (_first_heading(first_markdown.source) if first_markdown is not None else None) or executed.stem
-    banner = _mode_banner(entry, any(REDUCED_MARK in _output_text(cell) for cell in notebook.cells))
+    banner = _mode_banner(entry)
     if banner:
         at = 1 if notebook.cells and notebook.cells[0] is first_markdown and \
             first_markdown.source.lstrip().startswith("#") else 0

@@ -119,7 +119,8 @@ def oracle_selection(scene, executed):
 
 def learned_one_shot(scene, config, labels: str = "network") -> dict:
     """The MA-SCVP system on a simulator scene (``config.nbv`` chooses the warm-up NBV; the paper's
-    system uses one ``pc-nbv`` view). Returns one result row."""
+    system uses one ``pc-nbv`` view). Returns one result row, with the executed views, the planned
+    ones in execution order and the obstacle radius of its local paths."""
     if labels not in ("network", "oracle"):
         raise ConfigError(f"labels must be 'network' or 'oracle', got {labels!r}")
     space = scene.view_space
@@ -134,12 +135,13 @@ def learned_one_shot(scene, config, labels: str = "network") -> dict:
     else:
         selection = oracle_selection(scene, executed)
     coarse = np.concatenate(nbv.observations)
-    planned, path_length, tsp, _ = path_through(space, executed, list(selection.selected), coarse, config)
+    planned, path_length, tsp, radius = path_through(space, executed, list(selection.selected), coarse, config)
     planning_seconds = time.perf_counter() - t0
     return {"views": len(executed) + len(planned), "coverage": coverage_ratio(
                 covered_voxels(scene.truth_visibility, executed + planned), scene.oracle),
             "path_length_m": path_length,
             "coverage_after_warm_up": coverage_ratio(covered_voxels(scene.truth_visibility, executed), scene.oracle),
             "warm_up_views": len(executed), "planned_views": len(planned), "executed_views": executed,
+            "planned_order": planned, "obstacle_radius": radius,
             "status": selection.status,
             "optimal": bool(tsp.optimal), "seconds_warm_up": warm_up_seconds, "seconds_planning": planning_seconds}

@@ -68,12 +68,13 @@ def plot_species_bars(path, table: pd.DataFrame, value: str = "views", title: st
     return _save(fig, path, vector=True)
 
 
-_COMPARISON_LABELS = {"gmc": "GMC (sequential NBV)", "ours": "Ours (one-shot)", "optimum": "exact optimum"}
+_COMPARISON_LABELS = {"gmc": "GMC (sequential NBV)", "ma-scvp": "MA-SCVP (learned one-shot)", "ours": "Ours (one-shot)",
+                      "optimum": "exact optimum"}
 
 
 def plot_method_comparison(path, scene, plans, title: str = ""):
-    """The paper's comparison figure: one column per plan (``ComparedPlan``: GMC, Ours, optimum at
-    the same view count). Top: the plant, the candidate views (grey), the executed views numbered in
+    """The paper's comparison figure: one column per plan (``ComparedPlan``: GMC, MA-SCVP, Ours,
+    optimum). Top: the plant, the candidate views (grey), the executed views numbered in
     execution order and the path. Bottom: the plant's ground-truth voxels seen from below, covered
     (blue) and observable but missed (red, drawn larger and on top)."""
     space = scene.view_space

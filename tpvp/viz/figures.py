@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 import matplotlib
@@ -34,9 +35,22 @@ def _equal_axes(ax, points):
     ax.set_zlabel("z (m)")
 
 
+RASTER_POINTS = 2000
+
+
 def _save(fig, path, vector: bool = False) -> Path:
-    """Write ``fig`` to ``path`` (PNG) and, for the paper's figures (``vector=True``), a PDF beside it."""
+    """Write ``fig`` to ``path`` (PNG) and, for the paper's figures (``vector=True``), a PDF beside it.
+    In the PDF, point clouds (collections of more than :data:`RASTER_POINTS` marks) are drawn as
+    images and the rest as vectors: tens of thousands of vector marks make a PDF of tens of MB
+    that takes seconds to write and to open."""
     path = Path(path)
+    for ax in fig.axes:
+        for collection in ax.collections:
+            if len(collection.get_offsets()) > RASTER_POINTS:
+                with warnings.catch_warnings():
+                    # mplot3d's collections warn that they ignore it, but their base class's draw honours it
+                    warnings.filterwarnings("ignore", message="Rasterization of")
+                    collection.set_rasterized(True)
     for target in (path, path.with_suffix(".pdf")) if vector else (path,):
         with atomic_path(target) as tmp:
             fig.savefig(tmp, dpi=130, bbox_inches="tight", format=target.suffix.lstrip(".") or "png")

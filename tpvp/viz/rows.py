@@ -1,6 +1,6 @@
 """Figures of the greenhouse-row experiments (offscreen PNG): the coverage-path frontier of every
-method, a plan's path from the top and the side, and the candidate views of the three look-at
-priors. Rows are drawn in the plant box's own frame (x along the row, z up)."""
+method, a plan's path from the top and the side, the passive sweep's fields of view and the
+candidate views of the three look-at priors. Rows are drawn in the plant box's own frame (x along the row, z up)."""
 
 from __future__ import annotations
 
@@ -8,6 +8,7 @@ import numpy as np
 import pandas as pd
 from matplotlib.collections import LineCollection
 
+from tpvp.sensor.camera import look_at_rotations
 from tpvp.viz.figures import _save, _subsample, plt
 
 _METHOD_STYLE = {"coarse": ("black", "s"), "blockwise-nbv": ("tab:blue", "^"), "prior-obb-random": ("tab:gray", "v"),
@@ -78,6 +79,69 @@ def plot_row_paths(path, box, row_points, plans: dict, title: str = ""):
     fig.suptitle(title)
     fig.tight_layout()
     return _save(fig, path)
+
+
+def field_of_view_footprints(room, intrinsics) -> np.ndarray:
+    """Where each passive view's field of view meets the row's mid-plane (the plane through the
+    plant box centre across which the row is thin): ``(views, 4, 3)`` corners in the plant box
+    frame, NaN for a corner ray that never reaches the plane."""
+    box = room.plant_box
+    corners = np.array([[u, v] for u, v in ((0, 0), (intrinsics.width, 0), (intrinsics.width, intrinsics.height),
+                                            (0, intrinsics.height))], dtype=float)
+    rays = np.column_stack([(corners[:, 0] - intrinsics.cx) / intrinsics.fx,
+                            (corners[:, 1] - intrinsics.cy) / intrinsics.fy, np.ones(4)])
+    rotations = look_at_rotations(room.initial_positions, room.initial_look_ats)
+    origins = box.to_local(room.initial_positions)
+    directions = np.einsum("ij,vjk,ck->vci", box.rotation.T, rotations, rays)  # box frame, (views, 4, 3)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        depth = -origins[:, None, 1] / directions[..., 1]
+    depth[~(depth > 0)] = np.nan
+    return origins[:, None, :] + depth[..., None] * directions
+
+
+def plot_passive_sweep(path, room, row_points, intrinsics, title: str = ""):
+    """The passive warm start (the paper's passive-sweep figure), in the plant box frame: the plant
+    box (red), the view box the cameras move in (blue), the passive views (black) and their fields
+    of view (green). Top: from the aisle, each field of view where it meets the row's mid-plane.
+    Bottom: from above, each field of view's horizontal extent down to that plane."""
+    box, view_box = room.plant_box, room.view_box
+    row_local = box.to_local(_subsample(row_points, limit=40_000)[0])
+    cameras = box.to_local(room.initial_positions)
+    footprints = field_of_view_footprints(room, intrinsics)
+    view_corners = box.to_local(view_box.corners())
+    fig, axes = plt.subplots(2, 1, figsize=(11, 10), gridspec_kw={"height_ratios": [2.6, 1.4]})
+    for ax, (a, b, name) in zip(axes, ((0, 2, "from the aisle"), (0, 1, "from above"))):
+        ax.scatter(row_local[:, a], row_local[:, b], s=0.2, color="tab:green", alpha=0.25)
+        for corners, colour, label in ((box.to_local(box.corners()), "tab:red", "plant box"),
+                                       (view_corners, "tab:blue", "view box (camera workspace)")):
+            outline = _outline(corners[:, [a, b]])
+            ax.fill(outline[:, 0], outline[:, 1], facecolor="none", edgecolor=colour, linewidth=1.6, label=label)
+        for camera, footprint in zip(cameras, footprints):
+            if b == 2:  # the footprint on the mid-plane
+                ax.fill(footprint[:, 0], footprint[:, 2], color="limegreen", alpha=0.12)
+                ax.plot(*np.vstack([footprint, footprint[:1]])[:, [0, 2]].T, color="forestgreen", linewidth=0.6)
+            else:  # the horizontal extent: the camera to its footprint's left and right edges
+                edge = footprint[:, [a, b]]
+                for corner in (edge[np.nanargmin(edge[:, 0])], edge[np.nanargmax(edge[:, 0])]):
+                    ax.plot([camera[a], corner[0]], [camera[b], corner[1]], color="forestgreen", linewidth=0.6)
+        ax.scatter(cameras[:, a], cameras[:, b], s=30, marker="v" if b == 2 else "o", color="black", zorder=3,
+                   label=f"{len(cameras)} passive views")
+        ax.set_aspect("equal")
+        ax.set_xlabel("along the row (m)")
+        ax.set_ylabel("height (m)" if b == 2 else "across (m)")
+        ax.set_title(f"{name}" + (": fields of view on the row's mid-plane" if b == 2 else ""), fontsize=10)
+    axes[0].legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))
+    fig.suptitle(title or "The passive sweep's fields of view")
+    fig.tight_layout()
+    return _save(fig, path, vector=True)
+
+
+def _outline(points) -> np.ndarray:
+    """The convex outline of 2D points, closed (a box's corners seen along an axis)."""
+    from scipy.spatial import ConvexHull
+
+    hull = ConvexHull(points)
+    return points[np.append(hull.vertices, hull.vertices[0])]
 
 
 def plot_prior_candidates(path, box, row_points, candidate_sets: dict, title: str = ""):
