@@ -92,7 +92,8 @@ def _weights_label(weights) -> str:
 
 def _calibrate_case(case, targets, overrides) -> list[dict]:
     from tpvp.experiments.baselines import optimum
-    from tpvp.experiments.single_plant import build_scene, planning_surface, selection_problem, transfer
+    from tpvp.experiments.single_plant import build_scene, known, transfer
+    from tpvp.pipeline.plant import planning_surface, selection_problem
     from tpvp.inflation.weights import surface_area, surface_classes
     from tpvp.jit import compile_kernels
     from tpvp.setcover.methods import select_views
@@ -102,7 +103,7 @@ def _calibrate_case(case, targets, overrides) -> list[dict]:
     config = case.config(make_config("plant", overrides))
     scene = build_scene(*case.instance.load(), config)
     shared = transfer(scene, config)
-    surface = planning_surface(scene, config, shared)
+    surface = planning_surface(known(scene), config, shared)
     # every weighting of the grid reads the classes (per near_voxels, below) and the area
     surface = replace(surface, area=surface_area(surface.grid.keys, surface.grid.resolution, surface.inflated.planning))
     best = int(optimum(scene, config, targets=(ASKED,))["views"].iloc[0])
@@ -118,7 +119,7 @@ def _calibrate_case(case, targets, overrides) -> list[dict]:
         for target in targets:
             planned = with_overrides(config, {**weighting, "selection.coverage_target": target,
                                               "selection.planning_miss_ratio": 1.0})
-            selection = select_views(selection_problem(scene, planned, shared, surface), planned.selection)
+            selection = select_views(selection_problem(known(scene), planned, shared, surface), planned.selection)
             views = list(shared.executed) + [int(v) for v in selection.selected]
             rows.append({**case.labels(), "weights": _weights_label(weights), "target": target,
                          "views": len(views), "optimum_views": best,

@@ -18,7 +18,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent / "tpvp"
 BENCHMARKS = Path(__file__).resolve().parent
 TOP = ("cli", "cli_common", "__main__", "experiments", "session")  # may import anything below them
-ABOVE_STAGES = ("config", "learning", "experiments", "session", "cli", "cli_common", "__main__")
+ABOVE_STAGES = ("config", "pipeline", "learning", "experiments", "session", "cli", "cli_common", "__main__")
 
 
 def module_name(path: Path) -> str:
@@ -65,6 +65,8 @@ def upward(source: str, target: str) -> bool:
         return False
     if src == "learning":
         return dst in ("experiments", "cli", "__main__")
+    if src == "pipeline":  # above the stages and their configuration, below what runs it
+        return dst in ABOVE_STAGES and dst not in ("config", "pipeline")
     return dst in ABOVE_STAGES
 
 
@@ -116,6 +118,17 @@ class Report:
     upward: set  # (importer, imported, "in a function" | "at the top")
     local: list  # (file, line, source line) of function-local tpvp imports
     private: list  # (file, line, imported private name) across packages
+    graph: dict  # module -> the tpvp modules it imports (at the top or in a function)
+
+    def reachable(self, module: str) -> set:
+        """Every tpvp module ``module`` loads, directly or through others."""
+        seen, todo = set(), [module]
+        while todo:
+            for target in self.graph.get(todo.pop(), ()):
+                if target not in seen:
+                    seen.add(target)
+                    todo.append(target)
+        return seen
 
 
 def is_private(name: str) -> bool:
@@ -161,7 +174,7 @@ def analyse(root: Path = ROOT, others=(BENCHMARKS,)) -> Report:
             for names, _, line in imports(path):
                 private += [(path.relative_to(root.parent).as_posix(), line, name) for name in names
                             if is_private(name) and resolve(name) != name]
-    return Report(cycles(graph), up, local, private)
+    return Report(cycles(graph), up, local, private, graph)
 
 
 def main() -> int:

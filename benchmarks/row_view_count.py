@@ -30,7 +30,8 @@ import numpy as np
 import pandas as pd
 
 from tpvp.config import make_config
-from tpvp.experiments.greenhouse import build_row_scene, planning_visibility, row_transfer
+from tpvp.experiments.greenhouse import build_row_scene, known, row_transfer
+from tpvp.pipeline.row import planning_visibility
 from tpvp.experiments.rows import RowCase
 from tpvp.io import atomic_write_text
 from tpvp.jit import compile_kernels
@@ -92,7 +93,7 @@ def measure_case(room: str, pair: int, reference: str, resolutions, cache=None) 
     config = case.config(make_config("row"))
     scene = build_row_scene(*case.load(), config, date=case.date, cache_dir=cache)
     transferred = row_transfer(scene, config)
-    context = scene.prior_context(config.inflation.step, transferred)
+    context = known(scene).prior_context(config.inflation.step, transferred)
     ours = candidate_views("transfer", context, config.targets, config.seed)
     authors = candidate_views("authors-transfer", context, config.targets, config.seed)
     surfaces = {"planning surface": transferred.inflation.planning, "aligned previous only": transferred.alignment.warped}
@@ -102,7 +103,7 @@ def measure_case(room: str, pair: int, reference: str, resolutions, cache=None) 
             for surface_name, points in surfaces.items():
                 if candidates_name != "ours" and surface_name != "planning surface":
                     continue
-                visibility = planning_visibility(scene, candidates, points, resolution, config.sensor)
+                visibility = planning_visibility(scene.room, candidates, points, resolution, config.sensor)
                 occupied = len(voxels.voxelise(points, resolution))
                 targets = len(np.unique(candidates.target_ids)) if len(candidates.target_ids) else 0
                 rows.append({"room": room, "pair": pair, "reference": reference, "cover_cm": round(100 * resolution),

@@ -30,6 +30,28 @@ def test_no_upward_import(report):
     assert sorted(report.upward) == []
 
 
+#: Modules that hold or make the simulator's ground truth.
+TRUTH = ("tpvp.scene.simulator", "tpvp.experiments", "tpvp.synthetic", "tpvp.visibility.oracle_cache",
+         "tpvp.session.standin")
+
+
+def test_the_planner_cannot_reach_the_ground_truth(report):
+    """The pipeline loads nothing that holds the simulator's truth, and what it is given holds none:
+    the simulation and a real session hand it the same kind of object."""
+    from dataclasses import fields
+
+    from tpvp.pipeline.plant import Known
+    from tpvp.pipeline.row import RowKnown
+
+    planners = [module for module in report.graph if module.startswith("tpvp.pipeline")]
+    assert {"tpvp.pipeline.plant", "tpvp.pipeline.row"} <= set(planners)
+    for module in planners:
+        assert [m for m in report.reachable(module) if m.startswith(TRUTH)] == [], module
+    truth_fields = {"current", "grid", "oracle", "truth_visibility", "passive_visibility", "passive_seen"}
+    for known in (Known, RowKnown):
+        assert truth_fields.isdisjoint(f.name for f in fields(known)), known
+
+
 def test_function_local_imports_are_few_and_say_why(report):
     assert len(report.local) <= MAX_LOCAL_IMPORTS, report.local
     assert [(file, line) for file, line, text in report.local if "#" not in text] == []

@@ -10,7 +10,7 @@ from test_partial_cover import brute_fewest
 
 from tpvp.config import CALIBRATED_MISS_RATIO, PlantConfig, SelectionConfig, make_config
 from tpvp.errors import ConfigError
-from tpvp.experiments.single_plant import PlanningSurface, selection_problem
+from tpvp.pipeline.plant import PlanningSurface, selection_problem
 from tpvp.inflation.weights import (SURFACE_CLASSES, SurfaceWeightsConfig, surface_area, surface_classes,
                                    surface_weights)
 from tpvp.scene import voxels

@@ -17,7 +17,8 @@ import pandas as pd
 from tpvp.config import PlantConfig, with_overrides
 from tpvp.errors import ConfigError
 from tpvp.experiments.baselines import optimum
-from tpvp.experiments.single_plant import Scene, planning_surface, run_case, transfer
+from tpvp.experiments.single_plant import Scene, known, run_case, transfer
+from tpvp.pipeline.plant import planning_surface
 from tpvp.io import atomic_write_text
 from tpvp.io.publish import staged_folder
 from tpvp.viz.experiments import plot_frontier
@@ -36,7 +37,7 @@ def coverage_frontier(scene: Scene, config: PlantConfig, targets=DEFAULT_TARGETS
     if not values or values[0] <= 0 or values[-1] > 1:
         raise ConfigError(f"coverage targets must be fractions in (0, 1], got {list(targets)!r}")
     shared = transferred or transfer(scene, config)
-    surface = planning_surface(scene, config, shared)
+    surface = planning_surface(known(scene), config, shared)
     best = optimum(scene, config, targets=tuple(values)).set_index("target")
     rows = []
     for target in values:

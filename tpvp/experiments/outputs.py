@@ -138,7 +138,7 @@ def write_row_case_outputs(folder, scene, result, config, name: str = "row case"
     table.insert(1, "candidate_position", [-1] * len(room.initial_positions)
                  + result.candidates.position_ids[result.selected].tolist())
     plans = write_plan(folder, {"world": table}, {"world": f"{room.room} world frame (the room's boxes; metres)"})
-    simulated = scene.grid is not None  # a real session's scene has no ground truth
+    simulated = getattr(scene, "grid", None) is not None  # what a real session knows has no ground truth
     truth = {"oracle_voxels": int(len(scene.oracle)), "oracle_from_cache": scene.oracle_cached} if simulated else {}
     summary = {"name": name, "configuration": config.name, "room": room.room,
                "cover_resolution_m": config.selection.cover_resolution, **truth,

@@ -3,8 +3,8 @@ captures (single plants and greenhouse rows), no ground truth."""
 
 from tpvp.session.captures import Pose, back_project, read_depth, read_intrinsics, read_pose_file
 from tpvp.session.folder import Request, Session
-from tpvp.session.plant import PlantSession, SessionScene
+from tpvp.session.plant import PlantSession
 from tpvp.session.row import RowSession
 
-__all__ = ["PlantSession", "Pose", "Request", "RowSession", "Session", "SessionScene", "back_project", "read_depth",
+__all__ = ["PlantSession", "Pose", "Request", "RowSession", "Session", "back_project", "read_depth",
            "read_intrinsics", "read_pose_file"]

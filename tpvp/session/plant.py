@@ -18,42 +18,15 @@ the plan equals the simulator's plan of the pair with ``scene.frame = previous``
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-
 import numpy as np
 
 from tpvp.config import PlantConfig, with_overrides
 from tpvp.errors import ConfigError
-from tpvp.experiments.single_plant import plan_case, transfer
 from tpvp.nbv.warm_up import start_nbv
+from tpvp.pipeline.plant import Known, plan, transfer
 from tpvp.scene import voxels
-from tpvp.scene.simulator import planning_frame, scan_points
+from tpvp.scene.simulator import planning_frame
 from tpvp.session.folder import KINDS, Request, Session
-
-
-@dataclass(frozen=True, eq=False)
-class SessionScene:
-    """What a real session knows in the planning frame: the simulator's scene without ground truth."""
-
-    previous: np.ndarray
-    view_space: object
-    sensor: object
-    plant_from_scan: np.ndarray
-    table_points: np.ndarray
-    names: tuple
-    reduction: dict = field(default_factory=dict)
-
-    @property
-    def scan_scale(self) -> float:
-        return float(np.cbrt(np.linalg.det(self.plant_from_scan[:3, :3])))
-
-    def to_scan(self, points) -> np.ndarray:
-        """Planning-frame points in the world (the previous model's) frame."""
-        return scan_points(self.plant_from_scan, points)
-
-    def to_planning(self, points) -> np.ndarray:
-        matrix = self.plant_from_scan
-        return np.asarray(points, dtype=np.float64) @ matrix[:3, :3].T + matrix[:3, 3]
 
 
 class PlantSession(Session):
@@ -67,16 +40,15 @@ class PlantSession(Session):
         plant at its true size (candidate views and sensor range in metres)."""
         return with_overrides(config, {"scene.frame": "previous", "scene.scale": "native"})
 
-    def _scene(self, previous_scan) -> SessionScene:
+    def _scene(self, previous_scan) -> Known:
         config, name = self.config, self.state["previous_file"]
         frame = planning_frame(previous_scan, config, name)
         frame.view_space.view_index(config.initial_view)  # refuse a bad initial view up front
         previous = frame.to_planning(previous_scan)
         reduced = (voxels.voxel_centroids(previous, config.scene.reduce_resolution)
                    if len(previous) > config.scene.reduce_above else previous)
-        return SessionScene(reduced, frame.view_space, frame.sensor, frame.plant_from_scan,
-                            frame.reference.table_points, (name, "today's captures"),
-                            {"previous_points": len(previous), "previous_points_used": len(reduced)})
+        return Known(reduced, frame.view_space, frame.sensor, frame.plant_from_scan, frame.reference.table_points,
+                     (name, "today's captures"), {"previous_points": len(previous), "previous_points_used": len(reduced)})
 
     def views(self) -> tuple[np.ndarray, np.ndarray]:
         space = self.scene.view_space
@@ -126,13 +98,12 @@ class PlantSession(Session):
     def plan(self, overrides: dict | None = None, progress=None):
         """Plan on the captures (``overrides``: configuration keys for this plan, e.g. the
         coverage target): writes ``plan/`` as ``tpvp plan`` writes its folder (the world frame is
-        the scan frame) and returns the :class:`~tpvp.experiments.single_plant.CaseResult` (its
+        the scan frame) and returns the :class:`~tpvp.pipeline.plant.CaseResult` (its
         coverages are NaN: there is no ground truth)."""
         self.check_captured()
         from tpvp.experiments.outputs import write_case_outputs  # matplotlib, pandas: only a plan writes figures
         config = with_overrides(self.config, overrides or {})
-        transferred = transfer(self.scene, config, progress, nbv=self.nbv())
-        result = plan_case(self.scene, config, progress, transferred)
+        result = plan(self.scene, config, transfer(self.scene, config, self.nbv(), progress), progress)
         self.commit_plan(lambda folder: write_case_outputs(folder, self.scene, result, config,
                                                            name=self.folder.name),
                          {"planned_views": [int(v) for v in result.planned_views],

@@ -5,7 +5,8 @@ as the datasets' rows are aligned) asks for the 15 passive-sweep views in order;
 capture; ``plan`` runs the row pipeline on what was captured (warp-field registration, voxel
 inflation, the transfer look-at prior's candidates, set cover at the covering voxel with the
 passive views as executed, band path from the end of the sweep) and asks for the planned views.
-With the same captures the plan equals the simulator's (:func:`tpvp.experiments.greenhouse.run_row_case`).
+With the same captures the plan equals the simulator's (:func:`tpvp.experiments.greenhouse.run_row_case`):
+both run :func:`tpvp.pipeline.row.plan`.
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ import numpy as np
 
 from tpvp.config import RowConfig, with_overrides
 from tpvp.errors import ConfigError
-from tpvp.experiments.greenhouse import RowScene, check_row, plan_row_case, row_transfer
+from tpvp.pipeline.row import RowKnown, check_row, plan
 from tpvp.scene import voxels
 from tpvp.scene.boxes import room_config
 from tpvp.session.check import centroid_file
@@ -71,8 +72,8 @@ class RowSession(Session):
         box = self.scene.room.plant_box
         return np.all(np.abs(planning - box.center) <= 1.5 * box.half_extent.max(), axis=1)
 
-    def row_scene(self) -> RowScene:
-        """The row pipeline's scene from the passive captures: the coarse reconstruction (key
+    def known(self) -> RowKnown:
+        """What the planner knows from the passive captures: the coarse reconstruction (key
         order; per voxel the centroid of the points the first passive view that saw it captured
         there, or the voxel centre: ``config.coarse``) and, per voxel, that view's position."""
         passive = sorted((c["view"], i) for i, c in enumerate(self.captures) if c["view"] < self.warm_up_views())
@@ -90,19 +91,19 @@ class RowSession(Session):
             if self.config.coarse == "centroids":
                 coarse[at[new]] = np.load(self.folder / centroid_file(record), allow_pickle=False)[new]
         room = self.scene.room
-        return RowScene(room, self.scene.previous, None, None, None, None, None, coarse,
-                        room.initial_positions[first], self.config.sensor, self.scene.names)
+        return RowKnown(room, self.scene.previous, coarse, room.initial_positions[first], self.config.sensor,
+                        self.scene.names)
 
     def plan(self, overrides: dict | None = None, progress=None):
         """Plan on the passive captures: writes ``plan/`` as ``tpvp greenhouse`` writes its folder
-        and returns the :class:`~tpvp.experiments.greenhouse.RowCaseResult` (coverages NaN)."""
+        and returns the :class:`~tpvp.pipeline.row.RowCaseResult` (coverages NaN)."""
         self.check_captured()
         from tpvp.experiments.outputs import write_row_case_outputs  # matplotlib, pandas: only a plan writes figures
         config: RowConfig = with_overrides(self.config, overrides or {})
-        scene = self.row_scene()
-        result = plan_row_case(scene, config, progress, row_transfer(scene, config, progress))
+        known = self.known()
+        result = plan(known, config, progress=progress)
         n = self.warm_up_views()
-        self.commit_plan(lambda folder: write_row_case_outputs(folder, scene, result, config,
+        self.commit_plan(lambda folder: write_row_case_outputs(folder, known, result, config,
                                                                name=self.folder.name),
                          {"planned_views": list(range(n, n + len(result.selected))),
                           "positions": result.positions.tolist(), "look_ats": result.look_ats.tolist(),

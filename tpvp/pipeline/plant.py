@@ -1,0 +1,256 @@
+"""The planner for one plant: from what the robot knows to a plan.
+
+What it knows (:class:`Known`): the previous session's model, the candidate views and the sensor
+in the planning frame, and the views already executed with what they observed (the NBV method's
+state: the initial view and the warm-up NBVs). From that: registration of the previous model onto
+the coarse reconstruction -> inflation -> visibility of the planning surface (ray casting) -> view
+selection -> open TSP around the obstacle sphere. Every stage's method is chosen by name in the
+configuration (:class:`tpvp.config.PlantConfig`). The simulator's ground truth is not here: the
+simulation (:mod:`tpvp.experiments.single_plant`) executes the warm-up and the plan on it, a real
+session (:mod:`tpvp.session.plant`) captures them.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from tpvp.config import PlantConfig
+from tpvp.inflation import inflate
+from tpvp.inflation.weights import surface_area, surface_classes, surface_weights
+from tpvp.path.local import predicted_size
+from tpvp.path.route import path_through
+from tpvp.registration.methods import register
+from tpvp.scene import voxels
+from tpvp.scene.grid import build_grid
+from tpvp.setcover.methods import SelectionProblem, select_views
+from tpvp.visibility import visibility_matrix
+
+
+@dataclass(frozen=True, eq=False)
+class Known:
+    """What the robot knows in the planning frame before it plans: the previous session's model
+    (``previous``), the candidate views and the sensor, the planning frame itself
+    (``plant_from_scan``: scan metres -> planning frame, scale included) and the supporting table.
+    Nothing of today's plant but what the executed views observe (the NBV state given to
+    :func:`transfer`)."""
+
+    previous: np.ndarray
+    view_space: object  # tpvp.viewspace.ViewSpace
+    sensor: object  # SensorConfig in the planning frame
+    plant_from_scan: np.ndarray
+    table_points: np.ndarray
+    names: tuple  # (previous session, today's session) as the user named them
+    reduction: dict = field(default_factory=dict)
+
+    @property
+    def scan_scale(self) -> float:
+        """Planning-frame metres per scan metre."""
+        return float(np.cbrt(np.linalg.det(self.plant_from_scan[:3, :3])))
+
+    def to_scan(self, points) -> np.ndarray:
+        """Planning-frame points in the scan's (world) frame."""
+        matrix = np.asarray(self.plant_from_scan, dtype=np.float64)
+        return (np.asarray(points, dtype=np.float64) - matrix[:3, 3]) @ np.linalg.inv(matrix[:3, :3]).T
+
+    def to_planning(self, points) -> np.ndarray:
+        matrix = self.plant_from_scan
+        return np.asarray(points, dtype=np.float64) @ matrix[:3, :3].T + matrix[:3, 3]
+
+
+@dataclass(frozen=True, eq=False)
+class CaseResult:
+    executed_views: list  # initial view and warm-up NBVs, in order
+    planned_views: list  # selected views in execution order (after the last warm-up view)
+    coverage: float
+    coverage_warm_up: float
+    n_views: int  # warm-up views included, as in the paper
+    path_length: float  # planning frame (m)
+    chamfer_before: float  # transferred model vs coarse reconstruction (m, planning frame)
+    chamfer_after: float
+    selection: object  # tpvp.setcover.methods.Selection
+    tsp: object
+    timings: dict
+    clouds: dict  # coarse, previous, warped, inflation, planning (for figures and recordings)
+    obstacle: tuple  # (centre, radius) of the path's collision sphere
+    warnings: list = field(default_factory=list)  # plausibility warnings in the user's terms
+    planning_target: float = 1.0  # fraction of the planning surface the selection had to see
+
+    @property
+    def order(self) -> list:
+        """Every executed view in execution order: the initial view, the warm-up views, the planned ones."""
+        return list(self.executed_views) + list(self.planned_views)
+
+    @property
+    def set_cover(self):
+        """The set-cover solver's own result (bound, gap, dropped voxels), when that method ran."""
+        return self.selection.details
+
+    def summary(self) -> dict:
+        details = self.selection.details
+        solver = {}
+        if details is not None and hasattr(details, "objective"):
+            solver = {"set_cover_objective": details.objective, "set_cover_bound": details.bound,
+                      "set_cover_gap": details.gap, "set_cover_optimal": details.optimal}
+            if hasattr(details, "n_dropped_infeasible"):  # full set cover
+                solver["set_cover_dropped_voxels"] = details.n_dropped_infeasible
+            else:  # partial set cover (a coverage target below 1)
+                solver.update(set_cover_required_weight=details.required_weight,
+                              set_cover_covered_weight=details.covered_weight,
+                              set_cover_achievable_weight=details.achievable_weight)
+        return {
+            "views": self.n_views, "coverage": self.coverage, "path_length_m": self.path_length,
+            "warm_up_views": len(self.executed_views), "planned_views": len(self.planned_views),
+            "planning_target": self.planning_target,
+            "coverage_after_warm_up": self.coverage_warm_up,
+            "chamfer_before_mm": 1e3 * self.chamfer_before, "chamfer_after_mm": 1e3 * self.chamfer_after,
+            "selection_optimal": bool(self.selection.optimal), "selection_status": self.selection.status,
+            **solver, "tsp_optimal": self.tsp.optimal, "tsp_method": self.tsp.method,
+            "warnings": " | ".join(self.warnings),
+            **{f"seconds_{k}": v for k, v in self.timings.items()},
+        }
+
+
+@dataclass(frozen=True, eq=False)
+class Transfer:
+    """What the robot knows before planning: the executed views (initial + warm-up NBVs), their
+    observations (the coarse reconstruction) and the previous session aligned onto it."""
+
+    nbv: object  # the NBV method object, holding the executed views' state
+    executed: list
+    coarse: np.ndarray  # observed points, duplicates kept (as the reference feeds registration)
+    alignment: object  # tpvp.registration.methods.Alignment
+    timings: dict  # registration (s); the simulation adds warm_up
+    warnings: list
+
+
+def transfer(known: Known, config: PlantConfig, nbv, progress=None) -> Transfer:
+    """Registration of the previous session onto what the executed views saw. ``nbv``: the NBV
+    method holding the executed views (the initial view and the warm-up NBVs) and their
+    observations, from the simulator or from a real session's captures."""
+    say = progress or (lambda stage: None)
+    coarse = np.concatenate(nbv.observations)
+    t = time.perf_counter()
+    say("registration")
+    alignment = register(known.previous, coarse, config.registration, name=known.names[0])
+    return Transfer(nbv, list(nbv.executed), coarse, alignment, {"registration": time.perf_counter() - t},
+                    _registration_warnings(known, alignment, config))
+
+
+@dataclass(frozen=True, eq=False)
+class PlanningSurface:
+    """The planning surface of a case and what the candidate views see of it: the inflation's
+    result (P~ u Q u I), the planning grid, the (views x planning voxels) visibility, the class and
+    the area of each planning voxel (:mod:`tpvp.inflation.weights`) and the stage timings."""
+
+    inflated: object  # tpvp.inflation.InflationResult
+    grid: object  # tpvp.scene.grid.OccupancyGrid
+    visibility: object
+    classes: np.ndarray | None  # None unless config.surface_weights.enabled
+    area: np.ndarray | None
+    timings: dict
+
+
+def planning_surface(known: Known, config: PlantConfig, transferred: Transfer, progress=None) -> PlanningSurface:
+    """Inflation, the planning grid with its voxel classes, and visibility (ray casting)."""
+    say = progress or (lambda stage: None)
+    timings = {}
+    centre = np.zeros(3)
+    t = time.perf_counter()
+    say("inflation")
+    coarse, warped = transferred.coarse, transferred.alignment.warped
+    inflated = inflate(warped, coarse, centre, predicted_size(coarse, centre), config.inflation)
+    timings["inflation"] = time.perf_counter() - t
+
+    t = time.perf_counter()
+    say("visibility")
+    resolution = config.selection.cover_resolution
+    grid, visibility = planning_visibility(known, inflated.planning, resolution)
+    classes = area = None  # only a weighted coverage target reads them
+    if config.surface_weights.enabled:
+        classes = surface_classes(grid.keys, resolution, warped, coarse, config.surface_weights.near_voxels * resolution)
+        area = surface_area(grid.keys, resolution, inflated.planning) if config.surface_weights.area else None
+    timings["visibility"] = time.perf_counter() - t
+    return PlanningSurface(inflated, grid, visibility, classes, area, timings)
+
+
+def selection_problem(known: Known, config: PlantConfig, transferred: Transfer,
+                      surface: PlanningSurface) -> SelectionProblem:
+    """The view selection on ``surface``: the executed views, the planning target of the coverage
+    target and, below a target of 1, the voxels' class weights (``config.surface_weights``)."""
+    selection = config.selection
+    weights = None
+    if selection.coverage_target < 1.0 and config.surface_weights.enabled:
+        weights = surface_weights(surface.classes, config.surface_weights, surface.area)
+    return SelectionProblem(surface.visibility, tuple(transferred.executed), known.view_space,
+                            surface.grid.centres, selection.planning_target(config.view_space),
+                            voxel_weights=weights, nbv=transferred.nbv)
+
+
+def planning_visibility(known: Known, planning_cloud, resolution: float):
+    """The planning grid of ``planning_cloud`` voxelised at ``resolution`` and what each candidate
+    view sees of it (ray casting): ``(grid, (views x planning voxels) matrix)``."""
+    grid = build_grid(voxels.voxelise(planning_cloud, resolution), resolution)
+    space = known.view_space
+    return grid, visibility_matrix(grid, space.positions, space.look_ats, known.sensor)
+
+
+def plan(known: Known, config: PlantConfig, transferred: Transfer, progress=None,
+         surface: PlanningSurface | None = None) -> CaseResult:
+    """Inflation, visibility, view selection and the path, after :func:`transfer`. The result's
+    coverages are NaN: the planner has no ground truth to measure them on (the simulation fills
+    them in). ``surface``: the :func:`planning_surface` of this transfer and configuration when
+    already computed (plans that differ only in the selection share it)."""
+    say = progress or (lambda stage: None)
+    space = known.view_space
+    centre = np.zeros(3)
+    executed, coarse, alignment = transferred.executed, transferred.coarse, transferred.alignment
+    timings = dict(transferred.timings)
+    warnings = list(transferred.warnings)
+
+    surface = surface or planning_surface(known, config, transferred, progress)
+    timings.update(surface.timings)
+
+    t = time.perf_counter()
+    say("view selection")
+    problem = selection_problem(known, config, transferred, surface)
+    selection = select_views(problem, config.selection)
+    timings["selection"] = time.perf_counter() - t
+
+    t = time.perf_counter()
+    say("path")
+    planned, path_length, tsp, radius = path_through(space, executed, selection.selected, coarse, config)
+    timings["path"] = time.perf_counter() - t
+    timings["planning"] = sum(timings[k] for k in ("inflation", "visibility", "selection", "path"))
+
+    return CaseResult(
+        executed_views=executed, planned_views=planned,
+        coverage=float("nan"), coverage_warm_up=float("nan"), n_views=len(executed) + len(planned), path_length=path_length,
+        chamfer_before=alignment.chamfer_before, chamfer_after=alignment.chamfer_after,
+        selection=selection, tsp=tsp, timings=timings,
+        clouds={"coarse": np.unique(coarse, axis=0), "previous": known.previous,
+                "warped": alignment.warped, "inflation": surface.inflated.inflation,
+                "planning": surface.inflated.planning},
+        obstacle=(centre, radius), warnings=warnings, planning_target=problem.planning_target,
+    )
+
+
+def _registration_warnings(known: Known, alignment, config: PlantConfig) -> list:
+    """A registration that ends far from the coarse scan for the plant's size means the two scans
+    are hardly two sessions of one plant; said in the scans' own units."""
+    size = config.scene.largest_side
+    fraction = alignment.chamfer_after / size
+    if fraction <= config.registration.warn_chamfer_fraction:
+        return []
+    # Scan metres, in mm for a plant under a metre (as read with --units mm or auto), else in m
+    # (as read with --units m: the user sees the numbers of the files).
+    per_scan, unit = 1.0 / known.scan_scale, "m"
+    if size * per_scan < 1.0:
+        per_scan, unit = 1e3 * per_scan, "mm"
+    return [f"registration of {known.names[0]} onto the coarse scan of {known.names[1]} ends at "
+            f"{alignment.chamfer_after * per_scan:.3g} {unit} Chamfer ({100 * fraction:.1f} % of the plant's "
+            f"{size * per_scan:.3g} {unit}; a matching pair of sessions ends below "
+            f"{100 * config.registration.warn_chamfer_fraction:g} %): are these two sessions of the same "
+            f"plant? The plan relies on the aligned previous session"]
