@@ -31,8 +31,7 @@ def test_no_upward_import(report):
 
 
 #: Modules that hold or make the simulator's ground truth.
-TRUTH = ("tpvp.scene.simulator", "tpvp.experiments", "tpvp.synthetic", "tpvp.visibility.oracle_cache",
-         "tpvp.session.standin")
+TRUTH = ("tpvp.scene.simulator", "tpvp.experiments", "tpvp.synthetic", "tpvp.visibility.oracle_cache")
 
 
 def test_the_planner_cannot_reach_the_ground_truth(report):
@@ -50,6 +49,13 @@ def test_the_planner_cannot_reach_the_ground_truth(report):
     truth_fields = {"current", "grid", "oracle", "truth_visibility", "passive_visibility", "passive_seen"}
     for known in (Known, RowKnown):
         assert truth_fields.isdisjoint(f.name for f in fields(known)), known
+
+
+def test_a_real_session_runs_the_planner_not_the_experiments(report):
+    sessions = [module for module in report.graph if module.startswith("tpvp.session")]
+    assert "tpvp.session.plant" in sessions
+    for module in sessions:
+        assert [m for m in report.reachable(module) if m.startswith("tpvp.experiments")] == [], module
 
 
 def test_function_local_imports_are_few_and_say_why(report):

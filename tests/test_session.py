@@ -19,7 +19,7 @@ from tpvp.scene.samples import load_sample, sample_path
 from tpvp.scene.simulator import observation
 from tpvp.sensor.camera import D435
 from tpvp.session import Session
-from tpvp.session.standin import RowStandInCamera, StandInCamera
+from tpvp.experiments.standin import RowStandInCamera, StandInCamera
 
 CASES = [(space, initial) for space in ("hemisphere", "sphere") for initial in (17, 8, 21)]
 

@@ -101,10 +101,10 @@ class PlantSession(Session):
         the scan frame) and returns the :class:`~tpvp.pipeline.plant.CaseResult` (its
         coverages are NaN: there is no ground truth)."""
         self.check_captured()
-        from tpvp.experiments.outputs import write_case_outputs  # matplotlib, pandas: only a plan writes figures
+        from tpvp.pipeline.outputs import write_plan_outputs  # matplotlib, pandas: only a plan writes figures
         config = with_overrides(self.config, overrides or {})
         result = plan(self.scene, config, transfer(self.scene, config, self.nbv(), progress), progress)
-        self.commit_plan(lambda folder: write_case_outputs(folder, self.scene, result, config,
+        self.commit_plan(lambda folder: write_plan_outputs(folder, self.scene, result, config,
                                                            name=self.folder.name),
                          {"planned_views": [int(v) for v in result.planned_views],
                           "executed_views": [int(v) for v in result.executed_views],

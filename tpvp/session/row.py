@@ -98,12 +98,12 @@ class RowSession(Session):
         """Plan on the passive captures: writes ``plan/`` as ``tpvp greenhouse`` writes its folder
         and returns the :class:`~tpvp.pipeline.row.RowCaseResult` (coverages NaN)."""
         self.check_captured()
-        from tpvp.experiments.outputs import write_row_case_outputs  # matplotlib, pandas: only a plan writes figures
+        from tpvp.pipeline.outputs import write_row_plan_outputs  # matplotlib, pandas: only a plan writes figures
         config: RowConfig = with_overrides(self.config, overrides or {})
         known = self.known()
         result = plan(known, config, progress=progress)
         n = self.warm_up_views()
-        self.commit_plan(lambda folder: write_row_case_outputs(folder, known, result, config,
+        self.commit_plan(lambda folder: write_row_plan_outputs(folder, known, result, config,
                                                                name=self.folder.name),
                          {"planned_views": list(range(n, n + len(result.selected))),
                           "positions": result.positions.tolist(), "look_ats": result.look_ats.tolist(),
