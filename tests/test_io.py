@@ -838,3 +838,25 @@ def test_units_report(tmp_path, cloud):
     assert unit_choice(pts * 1000) == UnitChoice("auto", "mm", pytest.approx(side))
     with pytest.raises(ConfigError):
         unit_choice(pts, "cm")
+
+
+def test_a_new_point_cloud_format_is_one_registration_each_way(tmp_path):
+    """A reader and a writer added through the public hooks (READERS, WRITERS) serve
+    read_point_cloud and write_point_cloud like the built-in formats."""
+    from tpvp.io.readers import READERS
+    from tpvp.io.writers import WRITERS
+
+    WRITERS.register(".toy", "toy: one point per line, z y x")(
+        lambda pts, labels, binary, fmt: "".join(f"{z!r} {y!r} {x!r}\n" for x, y, z in pts.tolist()).encode())
+    READERS.register(".toy", "toy")(
+        lambda path, return_labels, mesh_samples, seed: (np.loadtxt(path, ndmin=2)[:, ::-1], None))
+    try:
+        points = np.random.default_rng(0).random((20, 3))
+        written = write_point_cloud(tmp_path / "cloud.toy", points)
+        assert written.read_text().splitlines()[0] == " ".join(repr(c) for c in points[0, ::-1].tolist())
+        assert np.array_equal(read_point_cloud(written, units="m"), points)
+    finally:
+        WRITERS.unregister(".toy")
+        READERS.unregister(".toy")
+    with pytest.raises(ConfigError, match="cannot write extension '.toy'"):
+        write_point_cloud(tmp_path / "again.toy", points)

@@ -22,13 +22,13 @@ def tiny_cases():
 @pytest.fixture(scope="module")
 def raw(tiny_cases, tmp_path_factory):
     cache = tmp_path_factory.mktemp("cache")
-    table = plants.run_experiments(tiny_cases, list(plants.ALL_METHODS), CONFIG, cache_dir=cache, progress=False)
+    table = plants.run_experiments(tiny_cases, list(plants.PLANT_METHODS.defaults()), CONFIG, cache_dir=cache, progress=False)
     return table, cache
 
 
 def test_every_method_gives_rows_for_every_case(raw, tiny_cases):
     table, _ = raw
-    for method in plants.ALL_METHODS:
+    for method in plants.PLANT_METHODS.defaults():
         rows = table[table["method"] == method]
         assert rows["initial_view"].nunique() == len(tiny_cases), method
     for method in ("ma-scvp", "ma-scvp-oracle"):  # a 12-view space: the learned planners say they do not apply
@@ -54,7 +54,7 @@ def test_tables_hold_every_method_row(raw):
     table, _ = raw
     out = plants.tables(table)
     methods = set(out["table1_coverage_effort"]["method"])
-    assert methods == set(plants.ALL_METHODS)
+    assert methods == set(plants.PLANT_METHODS.defaults())
     assert set(out["table3_inflation"]["method"]) == {"ours", "ours-no-inflation"}
     assert set(out["table4_registration"]["method"]) == {"ours", "initial-view-only"}
     assert plants.NOT_APPLICABLE in set(out["table1_coverage_effort"]["status"].dropna())
@@ -96,7 +96,7 @@ def test_the_comparison_shows_ma_scvp_on_its_32_views():
 def test_the_cache_is_reused_and_an_interrupted_run_resumes(raw, tiny_cases, monkeypatch):
     table, cache = raw
     files = sorted(cache.glob("*.parquet"))
-    assert len(files) == len(tiny_cases) * len(plants.ALL_METHODS)
+    assert len(files) == len(tiny_cases) * len(plants.PLANT_METHODS.defaults())
     files[0].unlink()  # as if the run had been interrupted before this task
     calls = []
     original = plants.PLANT_METHODS.get("ours")
@@ -106,7 +106,7 @@ def test_the_cache_is_reused_and_an_interrupted_run_resumes(raw, tiny_cases, mon
         return original(scene, config)
 
     monkeypatch.setitem(plants.PLANT_METHODS._entries, "ours", counting)
-    again = plants.run_experiments(tiny_cases, list(plants.ALL_METHODS), CONFIG, cache_dir=cache, progress=False)
+    again = plants.run_experiments(tiny_cases, list(plants.PLANT_METHODS.defaults()), CONFIG, cache_dir=cache, progress=False)
     assert len(sorted(cache.glob("*.parquet"))) == len(files)
     assert len(calls) <= 1  # only the missing task ran (if it was an "ours" task)
     timings = [c for c in table.columns if c.startswith("seconds")]
@@ -184,3 +184,23 @@ def test_the_same_rows_on_a_dask_cluster(tiny_cases, tmp_path, monkeypatch):
         pd.testing.assert_frame_equal(remote.drop(columns=timings), local.drop(columns=timings), check_dtype=False)
     with pytest.raises(ConfigError, match="cannot reach the Dask scheduler"):
         plants.run_experiments(tiny_cases[:1], ["ma-scvp"], CONFIG, progress=False, scheduler="tcp://127.0.0.1:1")
+
+
+def test_a_new_one_shot_method_is_one_registration(tiny_cases, tmp_path, capsys):
+    """A Table I method added through the public hook runs in the protocol by default and is listed
+    in the command's help; nothing else names it."""
+    plants.register_one_shot("toy-no-warm-up", {"nbv.warm_up_views": 0, "inflation.enabled": False},
+                             "a toy variant for this test")
+    try:
+        assert plants.PLANT_METHODS.defaults()[-1] == "toy-no-warm-up"
+        table = plants.run_experiments(tiny_cases[:1], ["toy-no-warm-up", "initial-view-only-no-inflation"], CONFIG,
+                                       cache_dir=tmp_path, progress=False)
+        toy, same = (table[table["method"] == m].drop(columns=["method"]).filter(regex="^(?!seconds)")
+                     for m in ("toy-no-warm-up", "initial-view-only-no-inflation"))
+        assert len(toy) == 1 and toy.reset_index(drop=True).equals(same.reset_index(drop=True))  # the same overrides
+        with pytest.raises(SystemExit):
+            main(["experiments", "plants", "--help"])
+        assert "toy-no-warm-up" in capsys.readouterr().out.replace("\n", " ")
+    finally:
+        plants.PLANT_METHODS.unregister("toy-no-warm-up")
+        plants.ONE_SHOT_METHODS.pop("toy-no-warm-up")

@@ -190,3 +190,18 @@ def test_signals_at_random_moments_of_a_step_leave_status_line_and_folder_in_agr
     for delay, signum in session_faults.signal_moments(3, duration, seed=3):
         result = session_faults.signal_try(kind, folder, bench, signum, delay=delay)
         assert session_faults.signal_ok(result) == [], result
+
+
+def test_after_a_signal_the_interrupts_debris_is_not_printed():
+    """An object the interrupt left half built may fail in its ``__del__`` (llvmlite's, while numba
+    loads): once a signal arrived, such an unraisable error is not printed; before, it is."""
+    from types import SimpleNamespace
+
+    from tpvp.__main__ import _redeliver
+
+    printed = []
+    debris = SimpleNamespace(exc_value=AttributeError("_as_parameter_"))
+    _redeliver([], printed.append)(debris)
+    assert printed == [debris]
+    _redeliver([signal.SIGTERM], printed.append)(debris)
+    assert printed == [debris]

@@ -93,10 +93,13 @@ def _interrupt(received: list):
 def _redeliver(received: list, previous_hook):
     """``sys.unraisablehook`` that raises a signal again whose ``KeyboardInterrupt`` was swallowed
     (raised inside a C callback, e.g. numba's cache loading through ctypes), instead of printing
-    "Exception ignored" and running on."""
+    "Exception ignored" and running on. Once a signal arrived, any other unraisable error is the
+    interrupt's debris (an object it left half built fails in its ``__del__``, e.g. llvmlite's
+    while numba loads): not printed, the command reports the interrupt."""
     def hook(unraisable):
-        if isinstance(unraisable.exc_value, KeyboardInterrupt) and received:
-            signal.raise_signal(received[-1])  # handled again once back in Python code
+        if received:
+            if isinstance(unraisable.exc_value, KeyboardInterrupt):
+                signal.raise_signal(received[-1])  # handled again once back in Python code
             return
         previous_hook(unraisable)
     return hook

@@ -170,7 +170,7 @@ def _experiments_plants(args) -> int:
     config = resolved_config(args)
     cases = plant_experiments.default_cases(args.quick, args.dataset, args.plants, args.pairs, args.paper_subset,
                                             tuple(args.view_spaces), tuple(args.rotations), tuple(args.initial_views))
-    methods = args.methods or list(plant_experiments.ALL_METHODS)
+    methods = args.methods or list(plant_experiments.PLANT_METHODS.defaults())
     where = f"the Dask cluster {args.scheduler}" if args.scheduler else f"{args.workers} local worker(s)"
     print(f"{len(cases)} cases x {len(methods)} methods on {where}; cache {args.cache}")
     raw = plant_experiments.run_experiments(cases, methods, config, cache_dir=args.cache, workers=args.workers,
@@ -327,8 +327,7 @@ def build_parser() -> argparse.ArgumentParser:
     plant.add_argument("--rotations", nargs="+", type=float, default=[0.0, 45.0], help="degrees about +Z (default: %(default)s)")
     plant.add_argument("--initial-views", nargs="+", type=int, default=[17, 8, 21], help="(default: %(default)s)")
     plant.add_argument("--methods", nargs="+", default=None,
-                       help="methods to run (default: all: ours, ours-no-inflation, initial-view-only, "
-                            "initial-view-only-no-inflation, one-shot-no-prior, gmc, optimum, ma-scvp)")
+                       help=f"methods to run ({plant_experiments.PLANT_METHODS.describe()})")
     plant.add_argument("--quick", action="store_true", help="a few cases: one tomato and one maize pair, rotation 0, view 17")
     plant.add_argument("--workers", type=int, default=2, help="parallel processes (default: %(default)s)")
     plant.add_argument("--scheduler", default=None, metavar="ADDRESS",
@@ -344,8 +343,8 @@ def build_parser() -> argparse.ArgumentParser:
     _row_options(rows, "outputs/experiments/rows", several_references=True)
     rows.add_argument("--rooms", nargs="+", default=list(ROOMS), choices=ROOMS, help="(default: %(default)s)")
     rows.add_argument("--methods", nargs="+", default=None,
-                      help="methods to run (default: coarse, blockwise-nbv, ours, prior-obb-random, prior-passive-random, "
-                           "prior-transfer-random, upper-limit)")
+                      help=f"methods to run (default: {', '.join(row_experiments.ALL_METHODS)}; also: "
+                           f"{', '.join(sorted(set(row_experiments.ROW_METHODS.names()) - set(row_experiments.ALL_METHODS)))})")
     rows.add_argument("--workers", type=int, default=2, help="parallel processes (default: %(default)s)")
     rows.add_argument("--scheduler", default=None, metavar="ADDRESS",
                       help="run the tasks on a Dask cluster, e.g. tcp://10.0.0.5:8786 (default: local processes)")

@@ -41,14 +41,18 @@ class Registry:
         self.kind = kind
         self._entries: dict[str, object] = {}
         self._help: dict[str, str] = {}
+        self._defaults: list[str] = []  # registration order
 
-    def register(self, name: str, help: str = ""):
-        """Decorator: ``@NBV_METHODS.register("geometric", "one line of help")``."""
+    def register(self, name: str, help: str = "", default: bool = False):
+        """Decorator: ``@NBV_METHODS.register("geometric", "one line of help")``. ``default``: the
+        entry is one of :meth:`defaults` (e.g. a method the paper's protocol runs when none is named)."""
         def add(obj):
             if name in self._entries:
                 raise ValueError(f"{self.kind} {name!r} is registered twice")
             self._entries[name] = obj
             self._help[name] = help or ((obj.__doc__ or "").strip().splitlines() or [""])[0]
+            if default:
+                self._defaults.append(name)
             return obj
         return add
 
@@ -56,6 +60,18 @@ class Registry:
         """Remove an entry (tests that register a temporary method)."""
         self._entries.pop(name, None)
         self._help.pop(name, None)
+        if name in self._defaults:
+            self._defaults.remove(name)
+
+    def defaults(self) -> tuple[str, ...]:
+        """The entries registered with ``default=True``, in registration order."""
+        load_plugins()
+        return tuple(self._defaults)
+
+    def describe(self) -> str:
+        """One line for a command's help: the defaults, then the other names."""
+        others = [name for name in self.names() if name not in self._defaults]
+        return f"default: {', '.join(self.defaults())}" + (f"; also: {', '.join(others)}" if others else "")
 
     def get(self, name: str):
         """The entry called ``name``; an unknown name is one :class:`ConfigError` line listing the choices."""

@@ -146,10 +146,6 @@ def dataset_instances(folder, plants=None, pairs=None, paper_subset: bool = Fals
     return out
 
 
-ALL_METHODS = ("ours", "ours-no-inflation", "initial-view-only", "initial-view-only-no-inflation",
-               "one-shot-no-prior", "gmc", "optimum", "ma-scvp", "ma-scvp-oracle")
-
-
 def default_cases(quick: bool = False, dataset=None, plants=None, pairs=None, paper_subset: bool = False,
                   view_spaces=VIEW_SPACES, rotations=ROTATIONS, initial_views=INITIAL_VIEWS,
                   with_bundled: bool = True) -> list[Case]:
@@ -216,41 +212,44 @@ def shared_transfer(scene, config):
     return shared(scene, key, lambda: transfer(scene, config))
 
 
-#: The one-shot methods: their help and the configuration overrides that Tables I, III and IV
-#: switch off or on.
-ONE_SHOT_METHODS = {
-    "ours": ({}, "the paper's method: warm-up NBV, registration, inflation, set cover, TSP"),
-    "ours-no-inflation": ({"inflation.enabled": False}, "planning on the aligned previous session only (Table III)"),
-    "initial-view-only": ({"nbv.warm_up_views": 0}, "registration on the initial view, no warm-up NBV (Table IV)"),
-    "initial-view-only-no-inflation": ({"nbv.warm_up_views": 0, "inflation.enabled": False},
-                                       "initial view only, without inflation"),
-    "one-shot-no-prior": ({"registration.method": "no-prior", "inflation.enabled": False},
-                          "set cover + TSP on the coarse reconstruction alone (no previous session)"),
-    "ours-pc-nbv": ({"nbv.method": "pc-nbv"}, "the paper's method with the learned PC-NBV warm-up view"),
-}
+#: The one-shot methods (Ours and its variants): name -> the configuration overrides it runs with
+#: (:func:`register_one_shot`).
+ONE_SHOT_METHODS: dict[str, dict] = {}
 
 
 def method_config(config: PlantConfig, method: str) -> PlantConfig:
     """``config`` with the overrides of the one-shot ``method`` (:data:`ONE_SHOT_METHODS`)."""
     if method not in ONE_SHOT_METHODS:
         raise KeyError(f"unknown one-shot method {method!r}; choose from {', '.join(ONE_SHOT_METHODS)}")
-    overrides, _ = ONE_SHOT_METHODS[method]
-    return with_overrides(config, overrides)
+    return with_overrides(config, ONE_SHOT_METHODS[method])
 
 
-def _one_shot(name: str):
+def register_one_shot(name: str, overrides: dict, help: str, default: bool = True) -> None:
+    """A one-shot method: the paper's method on a case with the configuration ``overrides``
+    (e.g. ``{"inflation.enabled": False}``), its warm-up and registration shared with the other
+    one-shot methods that run the same ones. ``default``: in the paper's protocol (Tables I-IV)."""
     def method(scene, config):
         config = method_config(config, name)
         return [_case_row(run_case(scene, config, transferred=shared_transfer(scene, config)), scene, config)]
-    return method
+    PLANT_METHODS.register(name, help, default)(method)
+    ONE_SHOT_METHODS[name] = dict(overrides)
 
 
-for _name, (_, _help) in ONE_SHOT_METHODS.items():
-    PLANT_METHODS.register(_name, _help)(_one_shot(_name))
+register_one_shot("ours", {}, "the paper's method: warm-up NBV, registration, inflation, set cover, TSP")
+register_one_shot("ours-no-inflation", {"inflation.enabled": False},
+                  "planning on the aligned previous session only (Table III)")
+register_one_shot("initial-view-only", {"nbv.warm_up_views": 0},
+                  "registration on the initial view, no warm-up NBV (Table IV)")
+register_one_shot("initial-view-only-no-inflation", {"nbv.warm_up_views": 0, "inflation.enabled": False},
+                  "initial view only, without inflation")
+register_one_shot("one-shot-no-prior", {"registration.method": "no-prior", "inflation.enabled": False},
+                  "set cover + TSP on the coarse reconstruction alone (no previous session)")
+register_one_shot("ours-pc-nbv", {"nbv.method": "pc-nbv"}, "the paper's method with the learned PC-NBV warm-up view",
+                  default=False)
 
 
 @PLANT_METHODS.register("gmc", "GMC-style sequential NBV from the initial view; the whole 1..20 curve "
-                                "(tie_picks: the picks so far that the tie rule decided)")
+                                "(tie_picks: the picks so far that the tie rule decided)", default=True)
 def gmc(scene, config):
     curve = nbv_curve(scene, config, max_views=max(GMC_BUDGETS))
     tie_picks = np.cumsum(curve["tied"].to_numpy() > 1)  # picks so far that a tie decided (gmc.tie_break)
@@ -260,7 +259,8 @@ def gmc(scene, config):
             for i, row in enumerate(curve.itertuples())]
 
 
-@PLANT_METHODS.register("optimum", "the exact optimum with perfect knowledge of today's plant (100 % and 98 %)")
+@PLANT_METHODS.register("optimum", "the exact optimum with perfect knowledge of today's plant (100 % and 98 %)",
+                        default=True)
 def exact_optimum(scene, config):
     table = optimum(scene, config, targets=(1.0, 0.98))
     return [{"target": row.target, "views": int(row.views), "coverage": row.coverage, "path_length_m": row.path_length,
@@ -284,10 +284,10 @@ def _learned(labels: str):
     return method
 
 
-PLANT_METHODS.register("ma-scvp", "MA-SCVP-style learned view set after one PC-NBV view (tpvp.learning)")(
-    _learned("network"))
-PLANT_METHODS.register("ma-scvp-oracle", "MA-SCVP's pipeline with the exact set cover it is trained to predict")(
-    _learned("oracle"))
+PLANT_METHODS.register("ma-scvp", "MA-SCVP-style learned view set after one PC-NBV view (tpvp.learning)",
+                       default=True)(_learned("network"))
+PLANT_METHODS.register("ma-scvp-oracle", "MA-SCVP's pipeline with the exact set cover it is trained to predict",
+                       default=True)(_learned("oracle"))
 
 
 # --------------------------------------------------------------------------------------------------

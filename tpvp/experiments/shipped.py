@@ -72,7 +72,7 @@ class Protocol:
         return rows.cached_row_experiments(self.cases(), list(self.methods), make_config("row"), cache_dir=cache_dir)
 
 
-_PLANT_METHODS = ("ours", "gmc", "one-shot-no-prior", "optimum", "ma-scvp", "ma-scvp-oracle")
+_PLANT_METHODS = ("ours", "gmc", "one-shot-no-prior", "optimum", "ma-scvp", "ma-scvp-oracle")  # Table I
 PROTOCOLS = {
     "table1": Protocol("plants", _PLANT_METHODS),
     "table2": Protocol("plants", ("ours",)),

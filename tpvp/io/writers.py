@@ -12,8 +12,12 @@ from tpvp.errors import ConfigError, PointCloudError
 from tpvp.io.atomic import atomic_write_bytes
 from tpvp.io.text import TEXT_EXTENSIONS
 from tpvp.io.units import as_points
+from tpvp.registry import Registry
 
-WRITE_EXTENSIONS = (".ply", ".pcd") + TEXT_EXTENSIONS
+#: Suffix -> encoder. Every encoder is ``encode(points, labels, binary, fmt) -> bytes`` (``points``
+#: already float32 or float64, ``labels`` int64 or None, ``fmt`` the text format of a coordinate);
+#: a new format is one function and one registration here.
+WRITERS = Registry("point-cloud writer")
 
 
 def write_point_cloud(path, points, labels=None, binary: bool = True, *, dtype=None) -> Path:
@@ -29,7 +33,7 @@ def write_point_cloud(path, points, labels=None, binary: bool = True, *, dtype=N
         raise ConfigError(f"path must be a file path, got {type(path).__name__}")
     path = Path(path)
     ext = path.suffix.lower()
-    if ext not in WRITE_EXTENSIONS:
+    if ext not in WRITERS:
         raise ConfigError(f"{path}: cannot write extension {ext or '(none)'!r} "
                           f"(supported: {' '.join(WRITE_EXTENSIONS)})")
     if dtype is None:
@@ -47,71 +51,80 @@ def write_point_cloud(path, points, labels=None, binary: bool = True, *, dtype=N
         nbad = int((~np.isfinite(pts).all(axis=1)).sum())
         raise PointCloudError(f"cannot write {path}: {nbad} points have NaN/inf coordinates")
     if labels is not None:
-        lab = np.asarray(labels)
-        if lab.shape != (len(pts),):
-            raise ConfigError(f"labels must have shape ({len(pts)},), got {lab.shape}")
-        if lab.dtype.kind not in "iu" and not (
-                lab.dtype.kind in "fb" and np.isfinite(lab).all()
-                and np.array_equal(lab, np.round(lab))):
-            raise ConfigError("labels must be integers")
-        lab = lab.astype(np.int64)
-        if lab.size and (lab.min() < np.iinfo(np.int32).min or lab.max() > np.iinfo(np.int32).max):
-            raise ConfigError("labels must fit in 32-bit integers")
-        labels = lab
-    pts = pts.astype(dt)
-    n = len(pts)
+        labels = _integer_labels(labels, len(pts))
     fmt = "%.9g" if dt == np.float32 else "%.17g"
-
-    if ext == ".ply":
-        ptype = "float" if dt == np.float32 else "double"
-        header = [
-            "ply",
-            f"format {'binary_little_endian' if binary else 'ascii'} 1.0",
-            "comment written by tpvp",
-            f"element vertex {n}",
-            *(f"property {ptype} {c}" for c in "xyz"),
-            *(["property int label"] if labels is not None else []),
-            "end_header",
-        ]
-        head = ("\n".join(header) + "\n").encode("ascii")
-        if binary:
-            body = _packed(pts, labels, "<", "i4")
-        else:
-            body = _text_body(pts, labels, fmt, " ")
-        atomic_write_bytes(path, head + body)
-    elif ext == ".pcd":
-        size = dt.itemsize
-        fields, sizes, types = "x y z", [size] * 3, ["F"] * 3
-        if labels is not None:
-            fields += " label"
-            sizes.append(4)
-            # PCL's label is unsigned; negative labels (e.g. -1 = unlabelled) need a signed type.
-            types.append("U" if labels.min() >= 0 else "I")
-        k = len(sizes)
-        header = [
-            "# .PCD v0.7 - Point Cloud Data file format",
-            "VERSION 0.7",
-            f"FIELDS {fields}",
-            f"SIZE {' '.join(map(str, sizes))}",
-            f"TYPE {' '.join(types)}",
-            f"COUNT {' '.join(['1'] * k)}",
-            f"WIDTH {n}",
-            "HEIGHT 1",
-            "VIEWPOINT 0 0 0 1 0 0 0",
-            f"POINTS {n}",
-            f"DATA {'binary' if binary else 'ascii'}",
-        ]
-        head = ("\n".join(header) + "\n").encode("ascii")
-        if binary:
-            body = _packed(pts, labels, "<", "u4" if types[-1] == "U" else "i4")
-        else:
-            body = _text_body(pts, labels, fmt, " ")
-        atomic_write_bytes(path, head + body)
-    else:
-        delim = "," if ext == ".csv" else " "
-        head = f"{n}\n".encode() if ext == ".pts" else b""
-        atomic_write_bytes(path, head + _text_body(pts, labels, fmt, delim))
+    atomic_write_bytes(path, WRITERS.get(ext)(pts.astype(dt), labels, binary, fmt))
     return path
+
+
+def _integer_labels(labels, n: int) -> np.ndarray:
+    lab = np.asarray(labels)
+    if lab.shape != (n,):
+        raise ConfigError(f"labels must have shape ({n},), got {lab.shape}")
+    if lab.dtype.kind not in "iu" and not (
+            lab.dtype.kind in "fb" and np.isfinite(lab).all()
+            and np.array_equal(lab, np.round(lab))):
+        raise ConfigError("labels must be integers")
+    lab = lab.astype(np.int64)
+    if lab.size and (lab.min() < np.iinfo(np.int32).min or lab.max() > np.iinfo(np.int32).max):
+        raise ConfigError("labels must fit in 32-bit integers")
+    return lab
+
+
+@WRITERS.register(".ply")
+def encode_ply(pts: np.ndarray, labels, binary: bool, fmt: str) -> bytes:
+    ptype = "float" if pts.dtype == np.float32 else "double"
+    header = [
+        "ply",
+        f"format {'binary_little_endian' if binary else 'ascii'} 1.0",
+        "comment written by tpvp",
+        f"element vertex {len(pts)}",
+        *(f"property {ptype} {c}" for c in "xyz"),
+        *(["property int label"] if labels is not None else []),
+        "end_header",
+    ]
+    body = _packed(pts, labels, "<", "i4") if binary else _text_body(pts, labels, fmt, " ")
+    return ("\n".join(header) + "\n").encode("ascii") + body
+
+
+@WRITERS.register(".pcd")
+def encode_pcd(pts: np.ndarray, labels, binary: bool, fmt: str) -> bytes:
+    size = pts.dtype.itemsize
+    fields, sizes, types = "x y z", [size] * 3, ["F"] * 3
+    if labels is not None:
+        fields += " label"
+        sizes.append(4)
+        # PCL's label is unsigned; negative labels (e.g. -1 = unlabelled) need a signed type.
+        types.append("U" if labels.min() >= 0 else "I")
+    n, k = len(pts), len(sizes)
+    header = [
+        "# .PCD v0.7 - Point Cloud Data file format",
+        "VERSION 0.7",
+        f"FIELDS {fields}",
+        f"SIZE {' '.join(map(str, sizes))}",
+        f"TYPE {' '.join(types)}",
+        f"COUNT {' '.join(['1'] * k)}",
+        f"WIDTH {n}",
+        "HEIGHT 1",
+        "VIEWPOINT 0 0 0 1 0 0 0",
+        f"POINTS {n}",
+        f"DATA {'binary' if binary else 'ascii'}",
+    ]
+    body = _packed(pts, labels, "<", "u4" if types[-1] == "U" else "i4") if binary else _text_body(pts, labels, fmt, " ")
+    return ("\n".join(header) + "\n").encode("ascii") + body
+
+
+def _text_encoder(extension: str):
+    """``x y z [label]`` per line; .csv comma-separated; .pts starts with the point count."""
+    def encode(pts: np.ndarray, labels, binary: bool, fmt: str) -> bytes:
+        head = f"{len(pts)}\n".encode() if extension == ".pts" else b""
+        return head + _text_body(pts, labels, fmt, "," if extension == ".csv" else " ")
+    return encode
+
+
+for _extension in TEXT_EXTENSIONS:
+    WRITERS.register(_extension, "text: x y z [label]")(_text_encoder(_extension))
+WRITE_EXTENSIONS = (".ply", ".pcd") + TEXT_EXTENSIONS
 
 
 def _packed(pts: np.ndarray, labels, endian: str, label_code: str) -> bytes:
