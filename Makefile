@@ -71,15 +71,15 @@ bench: $(STAMP)
 # Every notebook in full mode (the paper's protocol): executed .ipynb + HTML + the exported figures and
 # tables under $(OUT)/notebooks, published whole; make test runs them in reader's mode.
 notebooks: $(STAMP)
-	$(BIN)/python -m tpvp.experiments.notebooks --full --output $(OUT)/notebooks
+	$(BIN)/python -m tools.notebooks --full --output $(OUT)/notebooks
 
 # The documentation site (README, docs/, the executed notebooks; offline) into $(OUT)/site. Notebooks
 # that make notebooks published stay; the others are published in reader's mode first, copied from the
 # executions make test keeps (outputs/cache/notebooks) or executed when the notebook or library changed.
 docs: $(STAMP)
 	@start=$$(date +%s); \
-	$(BIN)/python -m tpvp.experiments.notebooks --keep-full --output $(OUT)/notebooks || exit $$?; \
-	$(BIN)/python -m tpvp.experiments.site --notebooks $(OUT)/notebooks --output $(OUT)/site || exit $$?; \
+	$(BIN)/python -m tools.notebooks --keep-full --output $(OUT)/notebooks || exit $$?; \
+	$(BIN)/python -m tools.site --notebooks $(OUT)/notebooks --output $(OUT)/site || exit $$?; \
 	echo "make docs: $$(( $$(date +%s) - start )) s in all; open $(OUT)/site/index.html"
 
 # Regenerate the learned planners' dataset and retrain both networks from scratch (~55 min on 2 cores);

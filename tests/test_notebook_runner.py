@@ -1,4 +1,5 @@
-"""The notebook runner: where a notebook's table rows come from, and publishing executed copies whole."""
+"""Where a notebook's table rows come from (tpvp.experiments.notebooks), and the notebook runner
+(tools/notebooks.py): publishing executed copies whole, keeping reader's-mode executions."""
 
 import json
 
@@ -7,6 +8,7 @@ import pandas as pd
 import pytest
 
 from tpvp.errors import ConfigError
+from tools import notebooks as runner
 from tpvp.experiments import notebooks, shipped
 from tpvp.viz.notebook import beside_paper, mean_std, paper_comparison, table_parts
 
@@ -114,10 +116,10 @@ def test_a_failing_notebook_leaves_the_published_copies_whole(tmp_path, monkeypa
     folder.mkdir()
     _notebook(folder / "01_ok.ipynb", "from pathlib import Path\nPath(output).mkdir(parents=True)\n"
                                       "(Path(output) / 'x.csv').write_text(str(full))\nprint('shown')")
-    monkeypatch.setattr(notebooks, "NOTEBOOKS", folder)
+    monkeypatch.setattr(runner, "NOTEBOOKS", folder)
     monkeypatch.setenv("TPVP_NOTEBOOK_CACHE", str(tmp_path / "kept"))
     destination = tmp_path / "published"
-    done = notebooks.run_notebooks(["01_ok"], full=False, destination=destination, progress=False)
+    done = runner.run_notebooks(["01_ok"], full=False, destination=destination, progress=False)
     assert done["01_ok"]["mode"] == "reader" and (destination / "01_ok" / "x.csv").read_text() == "False"
     executed = nbformat.read(destination / "01_ok.ipynb", as_version=4)
     assert executed.cells[1].outputs[0]["text"] == "shown\n"
@@ -126,7 +128,7 @@ def test_a_failing_notebook_leaves_the_published_copies_whole(tmp_path, monkeypa
 
     _notebook(folder / "02_broken.ipynb", "raise RuntimeError('half way')")
     with pytest.raises(Exception, match="half way"):
-        notebooks.run_notebooks(["01_ok", "02_broken"], full=True, destination=destination, progress=False)
+        runner.run_notebooks(["01_ok", "02_broken"], full=True, destination=destination, progress=False)
     after = {p.relative_to(destination): p.read_bytes() for p in destination.rglob("*") if p.is_file()}
     assert after == before  # the first notebook's new copy was not published either
     assert json.loads((destination / "manifest.json").read_text())["01_ok"]["mode"] == "reader"
@@ -141,28 +143,28 @@ def test_a_kept_reader_execution_is_reused_until_the_notebook_or_the_library_cha
     _notebook(folder / "01_ok.ipynb", "import os\nfrom pathlib import Path\nPath(output).mkdir(parents=True)\n"
                                       "(Path(output) / 'x.csv').write_text('1')\n"
                                       "print(os.environ['TPVP_EXPERIMENT_CACHE'].startswith(os.environ['CALLER']))")
-    monkeypatch.setattr(notebooks, "NOTEBOOKS", folder)
+    monkeypatch.setattr(runner, "NOTEBOOKS", folder)
     monkeypatch.setenv("TPVP_NOTEBOOK_CACHE", str(tmp_path / "kept"))
     monkeypatch.setenv("TPVP_EXPERIMENT_CACHE", str(tmp_path / "caller-cache"))
     monkeypatch.setenv("CALLER", str(tmp_path / "caller-cache"))
-    first = notebooks.run_notebooks(["01_ok"], destination=tmp_path / "a", progress=False)["01_ok"]
+    first = runner.run_notebooks(["01_ok"], destination=tmp_path / "a", progress=False)["01_ok"]
     assert "reused_utc" not in first
     assert nbformat.read(tmp_path / "a" / "01_ok.ipynb", as_version=4).cells[1].outputs[0]["text"] == "False\n"
-    key = notebooks.execution_key(folder / "01_ok.ipynb")
+    key = runner.execution_key(folder / "01_ok.ipynb")
     kept = lambda: [p.name for p in (tmp_path / "kept" / "01_ok").iterdir() if not p.name.startswith(".")]  # noqa: E731
     assert kept() == [key]
 
-    again = notebooks.run_notebooks(["01_ok"], destination=tmp_path / "b", progress=False)["01_ok"]
+    again = runner.run_notebooks(["01_ok"], destination=tmp_path / "b", progress=False)["01_ok"]
     assert "reused_utc" in again and again["executed_utc"] == first["executed_utc"]
     reused = (tmp_path / "b" / "01_ok.ipynb").read_text()
     assert str(tmp_path / "b" / "01_ok") in reused and str(tmp_path / "a") not in reused
-    assert notebooks.FOLDER_TOKEN not in reused + (tmp_path / "b" / "01_ok.html").read_text()
+    assert runner.FOLDER_TOKEN not in reused + (tmp_path / "b" / "01_ok.html").read_text()
     assert (tmp_path / "b" / "01_ok" / "x.csv").read_text() == "1"
 
     # executed when asked to, and again once the notebook changes; the older execution is dropped
-    forced = notebooks.run_notebooks(["01_ok"], destination=tmp_path / "b", progress=False, reuse=False)["01_ok"]
+    forced = runner.run_notebooks(["01_ok"], destination=tmp_path / "b", progress=False, reuse=False)["01_ok"]
     assert "reused_utc" not in forced
     _notebook(folder / "01_ok.ipynb", "print('changed')")
-    changed = notebooks.run_notebooks(["01_ok"], destination=tmp_path / "b", progress=False)["01_ok"]
+    changed = runner.run_notebooks(["01_ok"], destination=tmp_path / "b", progress=False)["01_ok"]
     assert "reused_utc" not in changed and not (tmp_path / "b" / "01_ok" / "x.csv").exists()
-    assert kept() == [notebooks.execution_key(folder / "01_ok.ipynb")]
+    assert kept() == [runner.execution_key(folder / "01_ok.ipynb")]

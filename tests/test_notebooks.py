@@ -1,6 +1,6 @@
 """Every notebook runs unattended in reader's mode, shows what it makes, and is stored clean.
 
-The executions go through :func:`tpvp.experiments.notebooks.run_notebooks`, the path ``make
+The executions go through :func:`tools.notebooks.run_notebooks`, the path ``make
 notebooks`` takes, into one folder per test worker (``executed_notebooks``); each one is kept
 (``outputs/cache/notebooks``) for the site test (tests/test_site.py) and ``make docs`` to copy.
 """
@@ -11,7 +11,7 @@ import re
 import nbformat
 import pytest
 
-from tpvp.experiments.notebooks import notebook_paths, run_notebooks, set_parameters
+from tools.notebooks import notebook_paths, run_notebooks, set_parameters
 
 NOTEBOOKS = notebook_paths()
 LOCAL_PATH = re.compile(r"(/work/|/home/|/tmp/|/root/|[A-Z]:\\\\)")

@@ -101,8 +101,8 @@ def test_site_pages_load_with_their_figures_links_and_3d_views_offline(tmp_path,
         pytest.skip("the playwright package is missing (environment.txt)")
     from playwright.sync_api import sync_playwright
 
-    from tpvp.experiments.notebooks import run_notebooks
-    from tpvp.experiments.site import build_site
+    from tools.notebooks import run_notebooks
+    from tools.site import build_site
 
     executed_notebooks = tmp_path / "notebooks"
     run_notebooks(full=False, destination=executed_notebooks, progress=False)  # kept executions are copied

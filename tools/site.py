@@ -1,6 +1,6 @@
 """Build the documentation site: README, docs/ and the executed notebooks as one static site.
 
-``python -m tpvp.experiments.site [--notebooks DIR] [--output DIR]`` (``make docs``) assembles a
+``python -m tools.site [--notebooks DIR] [--output DIR]`` (``make docs``) assembles a
 temporary MkDocs source folder and builds it with mkdocs-material + mkdocs-jupyter (settings in the
 repository's ``mkdocs.yml``) in strict mode:
 
@@ -9,14 +9,14 @@ repository's ``mkdocs.yml``) in strict mode:
   text);
 - every ``docs/*.md`` page (and the other files under ``docs/``, e.g. pictures), as they are at
   build time;
-- every notebook of ``notebooks/`` as executed by :mod:`tpvp.experiments.notebooks` into the
+- every notebook of ``notebooks/`` as executed by :mod:`tools.notebooks` into the
   notebooks folder (not executed again); a notebook executed in reader's mode carries a warning at
   its top. A missing executed notebook fails the build with one line saying what to run.
 
 The site is published to ``destination`` through :func:`tpvp.io.publish.staged_folder`: an
 interrupted or failed build leaves the previous site whole. It needs no network: no web fonts,
 plotly.js is inline in the notebooks' outputs, search runs in the browser, and MathJax is a local
-copy (:func:`tpvp.experiments.notebooks.mathjax_folder`) or, where none is installed, math stays
+copy (:func:`tools.notebooks.mathjax_folder`) or, where none is installed, math stays
 as TeX text.
 """
 
@@ -35,15 +35,8 @@ import time
 from pathlib import Path
 
 from tpvp.errors import ConfigError, run_command
-from tpvp.experiments.notebooks import (
-    MANIFEST,
-    NOTEBOOKS,
-    ROOT,
-    copy_mathjax,
-    mathjax_folder,
-    notebook_paths,
-    published_results,
-)
+from tpvp.experiments.notebooks import published_results
+from tools.notebooks import MANIFEST, NOTEBOOKS, ROOT, copy_mathjax, mathjax_folder, notebook_paths
 from tpvp.io.publish import staged_folder
 
 DOCS = ROOT / "docs"
@@ -58,7 +51,7 @@ _MATHJAX_LOCAL_CONFIG = """MathJax.Hub.Config({
 });
 MathJax.Ajax.loadComplete("[MathJax]/config/local/tpvp.js");
 """
-_RUN_NOTEBOOKS = "python -m tpvp.experiments.notebooks"
+_RUN_NOTEBOOKS = "python -m tools.notebooks"
 
 
 # --------------------------------------------------------------------------------------------------
@@ -340,7 +333,7 @@ def build_site(notebooks_folder, destination, *, docs=DOCS, readme=README, allow
     """Build the site from the executed notebooks in ``notebooks_folder`` (see the module docstring)
     and publish it to ``destination`` whole. ``allow_missing``: build from the notebooks that are
     there (at least one) instead of failing. ``mathjax``: True finds a local copy
-    (:func:`tpvp.experiments.notebooks.mathjax_folder`), a folder uses that one, None leaves math as text. Returns a summary:
+    (:func:`tools.notebooks.mathjax_folder`), a folder uses that one, None leaves math as text. Returns a summary:
     seconds, notebooks with their modes, reference pages, mathjax folder, destination."""
     start = time.perf_counter()
     notebooks_folder = Path(notebooks_folder).absolute()
