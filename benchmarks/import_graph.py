@@ -16,7 +16,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent / "tpvp"
+DATA_TOOLS = ROOT.parent / "data_tools"  # above the library: it may load foundations and stages only
 BENCHMARKS = Path(__file__).resolve().parent
+OWN = ("tpvp", "data_tools")
 TOP = ("cli", "cli_common", "__main__", "experiments", "session")  # may import anything below them
 ABOVE_STAGES = ("config", "pipeline", "learning", "experiments", "session", "cli", "cli_common", "__main__")
 
@@ -38,7 +40,7 @@ def imports(path: Path) -> list[tuple[list[str], bool, int]]:
         for child in ast.iter_child_nodes(node):
             inside = in_function or isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda))
             if isinstance(child, ast.Import):
-                names = [a.name for a in child.names if a.name.split(".")[0] == "tpvp"]
+                names = [a.name for a in child.names if a.name.split(".")[0] in OWN]
                 if names:
                     found.append((names, inside, child.lineno))
             elif isinstance(child, ast.ImportFrom):
@@ -46,7 +48,7 @@ def imports(path: Path) -> list[tuple[list[str], bool, int]]:
                 if child.level:
                     parent = package.split(".")[: len(package.split(".")) - child.level + 1]
                     base = ".".join(parent + ([base] if base else []))
-                if base.split(".")[0] == "tpvp":
+                if base.split(".")[0] in OWN:
                     found.append(([f"{base}.{a.name}" for a in child.names], inside, child.lineno))
             visit(child, inside)
 
@@ -60,6 +62,10 @@ def layer(module: str) -> str:
 
 
 def upward(source: str, target: str) -> bool:
+    if target.startswith("data_tools"):
+        return not source.startswith("data_tools")  # the library never loads the data tools
+    if source.startswith("data_tools"):  # the layers that plan or run experiments are not theirs
+        return layer(target) in ("config", "pipeline", "learning", "experiments", "session", "cli", "cli_common")
     src, dst = layer(source), layer(target)
     if src in TOP:
         return False
@@ -142,8 +148,10 @@ def package_of(module: str) -> str:
     return ".".join(parts[:2])
 
 
-def analyse(root: Path = ROOT, others=(BENCHMARKS,)) -> Report:
-    files = sorted(root.rglob("*.py"))
+def analyse(root: Path = ROOT, others=(BENCHMARKS,), above=(DATA_TOOLS,)) -> Report:
+    """The import graph of ``root`` and of the folders ``above`` it (their function-local imports
+    are not counted); the private names that ``others`` import."""
+    files = sorted(root.rglob("*.py")) + sorted(f for folder in above for f in folder.rglob("*.py"))
     modules = {module_name(p) for p in files}
 
     def resolve(target: str) -> str:
@@ -158,7 +166,7 @@ def analyse(root: Path = ROOT, others=(BENCHMARKS,)) -> Report:
         graph.setdefault(source, set())
         for names, inside, line in imports(path):
             targets = {resolve(name) for name in names} - {"", source}
-            if inside and targets:
+            if inside and targets and source.startswith("tpvp"):
                 local.append((path.relative_to(root.parent).as_posix(), line, lines[line - 1].strip()))
             for target in targets:
                 graph[source].add(target)

@@ -33,7 +33,7 @@ def variants(scene, config):
     """(label, scene, config) of the old and the new code on one scene."""
     old_wf = replace(config.registration.warp_field, correspondences="previous-to-coarse")
     old = replace(config, registration=replace(config.registration, warp_field=old_wf))
-    return [("old", replace(scene, coarse=scene.grid.centres[scene.passive_seen]), old), ("new", scene, config)]
+    return [("old", replace(scene, known=replace(scene.known, coarse=scene.grid.centres[scene.passive_seen])), old), ("new", scene, config)]
 
 
 def measure(scene, config) -> dict:

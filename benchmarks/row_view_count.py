@@ -30,7 +30,7 @@ import numpy as np
 import pandas as pd
 
 from tpvp.config import make_config
-from tpvp.experiments.greenhouse import build_row_scene, known, row_transfer
+from tpvp.experiments.greenhouse import build_row_scene, row_transfer
 from tpvp.pipeline.row import planning_visibility
 from tpvp.experiments.rows import RowCase
 from tpvp.io import atomic_write_text
@@ -93,7 +93,7 @@ def measure_case(room: str, pair: int, reference: str, resolutions, cache=None) 
     config = case.config(make_config("row"))
     scene = build_row_scene(*case.load(), config, date=case.date, cache_dir=cache)
     transferred = row_transfer(scene, config)
-    context = known(scene).prior_context(config.inflation.step, transferred)
+    context = scene.known.prior_context(config.inflation.step, transferred)
     ours = candidate_views("transfer", context, config.targets, config.seed)
     authors = candidate_views("authors-transfer", context, config.targets, config.seed)
     surfaces = {"planning surface": transferred.inflation.planning, "aligned previous only": transferred.alignment.warped}

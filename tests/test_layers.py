@@ -30,6 +30,14 @@ def test_no_upward_import(report):
     assert sorted(report.upward) == []
 
 
+def test_the_data_tools_import_neither_the_planner_nor_the_experiments(report):
+    tools = [module for module in report.graph if module.startswith("data_tools")]
+    assert "data_tools.greenhouse" in tools
+    above = ("tpvp.config", "tpvp.pipeline", "tpvp.learning", "tpvp.experiments", "tpvp.session", "tpvp.cli")
+    for module in tools:
+        assert [m for m in report.graph[module] if m.startswith(above)] == [], module
+
+
 #: Modules that hold or make the simulator's ground truth.
 TRUTH = ("tpvp.scene.simulator", "tpvp.experiments", "tpvp.synthetic", "tpvp.visibility.oracle_cache")
 

@@ -157,7 +157,7 @@ def test_look_at_priors_are_a_registry_of_the_ladder_and_the_authors_files():
 
 
 def test_the_authors_look_at_files_as_candidates(scene):
-    dated = replace(scene, date="20250918")
+    dated = replace(scene, known=replace(scene.known, date="20250918"))
     for prior, name in AUTHORS_PRIORS.items():
         table = candidate_look_ats("room1", "20250918", name)
         candidates = greenhouse.row_candidates(dated, f"authors-{prior}", QUICK)

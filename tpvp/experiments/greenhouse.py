@@ -1,7 +1,7 @@
 """One greenhouse-row case of the paper, end to end in the simulator (docs/greenhouse.md).
 
 The passive sweep (15 fixed views) is captured on the current session's ground truth; the planner
-(:mod:`tpvp.pipeline.row`) plans from what the robot knows (:func:`known`: the coarse
+(:mod:`tpvp.pipeline.row`) plans from what the robot knows (``scene.known``: the coarse
 reconstruction Q and the previous session, never the ground truth); the plan is executed on the
 ground truth, its coverage normalised by the FOV-free oracle (cached on disk). The baselines
 of Tables V-VI (the prior ladder with random selection, each prior's upper limit) reuse the same
@@ -13,7 +13,7 @@ in order, with the room and every setting taken from the one :class:`tpvp.config
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -31,25 +31,26 @@ from tpvp.visibility.oracle_cache import cached_oracle
 
 @dataclass(frozen=True, eq=False)
 class RowScene:
-    """A pair of sessions of one row in the room's (world) frame, the current ground truth, its
-    oracle and what the passive sweep saw of it: the voxel ids ``passive_seen``, the centroids of
-    the ground truth's points in them (the coarse reconstruction Q, ``coarse``) and, per point of Q, the position of the first passive
-    view that saw it (``passive_cameras``)."""
+    """A simulated pair of sessions of one row in the room's (world) frame: what the robot knows
+    (``known``: the room, the previous session, the coarse reconstruction Q of the passive sweep and
+    its cameras, the sensor; read through, ``scene.room`` is ``scene.known.room``) and the current
+    session's ground truth, its oracle and the voxel ids the passive sweep saw (``passive_seen``)."""
 
-    room: object  # tpvp.scene.boxes.RoomConfig
-    previous: np.ndarray  # previous session, voxel centroids at the ground-truth voxel
+    known: RowKnown
     current: np.ndarray
     grid: object  # OccupancyGrid of the current ground truth
     oracle: np.ndarray
     passive_visibility: object  # csr (15, voxels)
     passive_seen: np.ndarray
-    coarse: np.ndarray
-    passive_cameras: np.ndarray
-    sensor: object
-    names: tuple = ("previous session", "current session")
-    timings: dict = field(default_factory=dict)
     oracle_cached: bool = False
-    date: str | None = None  # YYYYMMDD of the current session, when known
+
+    def __getattr__(self, name):
+        if name.startswith("__") or name == "known":  # copy and pickle probe dunders before known exists
+            raise AttributeError(name)
+        try:
+            return getattr(self.known, name)
+        except AttributeError:
+            raise AttributeError(f"'RowScene' object has no attribute {name!r}") from None
 
 
 def build_row_scene(previous_points, current_points, config: RowConfig = RowConfig(),
@@ -89,9 +90,9 @@ def build_row_scene(previous_points, current_points, config: RowConfig = RowConf
         raise PointCloudError(f"{names[1]}: no voxel of the row is visible from {room_cfg.room}'s view box")
     current = voxels.voxel_centroids(current, resolution)
     observed = observed_points(grid, current) if config.coarse == "centroids" else grid.centres
-    return RowScene(room_cfg, previous, current, grid, oracle, passive, seen, observed[seen],
-                    room_cfg.initial_positions[first_view[seen]], config.sensor, tuple(names), timings, from_cache,
-                    date)
+    known = RowKnown(room_cfg, previous, observed[seen], room_cfg.initial_positions[first_view[seen]], config.sensor,
+                     tuple(names), timings, date)
+    return RowScene(known, current, grid, oracle, passive, seen, from_cache)
 
 
 def observed_points(grid, centroids) -> np.ndarray:
@@ -108,16 +109,10 @@ def observed_points(grid, centroids) -> np.ndarray:
     return np.where(same[:, None], centroids, centres)
 
 
-def known(scene: RowScene) -> RowKnown:
-    """What the robot knows of a simulated row before it plans: the scene without its ground truth."""
-    return RowKnown(scene.room, scene.previous, scene.coarse, scene.passive_cameras, scene.sensor, scene.names,
-                    scene.timings, scene.date)
-
-
 def row_transfer(scene: RowScene, config: RowConfig = RowConfig(), progress=None) -> RowTransfer:
     """The planner's registration and inflation (:func:`tpvp.pipeline.row.transfer`) on what the
     simulated passive sweep saw."""
-    return transfer(known(scene), config, progress)
+    return transfer(scene.known, config, progress)
 
 
 def row_candidates(scene: RowScene, prior: str, config: RowConfig = RowConfig(),
@@ -126,7 +121,7 @@ def row_candidates(scene: RowScene, prior: str, config: RowConfig = RowConfig(),
     :data:`tpvp.viewspace.priors.LOOK_AT_PRIORS`: ``obb``, ``passive``, ``transfer``, which needs
     ``transferred``, or ``authors-<prior>``, which needs the scene's date), ``config.targets`` of
     them, surface voxel ``config.inflation.step`` (docs/greenhouse.md#look-at-candidates)."""
-    context = known(scene).prior_context(config.inflation.step, transferred)
+    context = scene.known.prior_context(config.inflation.step, transferred)
     return candidate_views(prior, context, config.targets, config.seed)
 
 
@@ -146,7 +141,7 @@ def run_row_case(scene: RowScene, config: RowConfig = RowConfig(), progress=None
     """Ours on one row pair, one block per stage: transfer, the transfer prior's candidates, their
     visibility on the planning surface, set cover with the passive views as executed, band path from
     the end of the passive sweep, execution. ``transferred``: :func:`row_transfer` of this scene."""
-    result = plan(known(scene), config, transferred, progress)
+    result = plan(scene.known, config, transferred, progress)
     timings = dict(result.timings)
     with timed(timings, "execution", progress or (lambda stage: None), "execution"):
         coverage = row_coverage(scene, execute(scene, result.positions, result.look_ats))

@@ -49,7 +49,7 @@ def write_row_case_outputs(folder, scene, result, config, name: str = "row case"
     with the oracle's size and whether it came from the cache, and the coverages."""
     measured = Measured({"oracle_voxels": int(len(scene.oracle)), "oracle_from_cache": scene.oracle_cached},
                         scene.current)
-    return write_row_plan_outputs(folder, greenhouse.known(scene), result, config, name, extra_summary, measured)
+    return write_row_plan_outputs(folder, scene.known, result, config, name, extra_summary, measured)
 
 
 def row_plan_3d(scene, result, title: str = ""):
