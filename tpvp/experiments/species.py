@@ -31,7 +31,7 @@ class Showcase:
     case: object  # tpvp.experiments.plants.Case
     config: object  # PlantConfig of the case
     scene: object  # tpvp.experiments.single_plant.Scene
-    result: object  # tpvp.experiments.single_plant.CaseResult
+    result: object  # tpvp.pipeline.plant.CaseResult
 
     @property
     def order(self) -> list:
