@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from tpvp.experiments import greenhouse, single_plant
+from tpvp.experiments import single_plant
 from tpvp.experiments.greenhouse import execute
 from tpvp.pipeline.outputs import Measured, write_plan_outputs, write_row_plan_outputs
 from tpvp.viz import plot_coverage
