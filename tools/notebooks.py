@@ -108,17 +108,23 @@ def execution_cache() -> Path:
     return Path(os.environ.get("TPVP_NOTEBOOK_CACHE") or ROOT / "outputs" / "cache" / "notebooks")
 
 
-def execution_key(path) -> str:
-    """What a reader's-mode execution of notebook ``path`` depends on: the notebook, every file of
-    the library (``tpvp/``, its shipped data and results included, ``data_tools/``), this runner
+def library_digest() -> bytes:
+    """What every reader's-mode execution depends on besides its notebook: every file of the
+    library (``tpvp/``, its shipped data and results included, ``data_tools/``), this runner
     (``tools/``) and the environment it was installed from. Compiled files and caches are left out."""
-    digest = hashlib.sha256(Path(path).read_bytes())
+    digest = hashlib.sha256()
     files = [f for folder in ("tpvp", "data_tools", "tools") for f in (ROOT / folder).rglob("*")
              if f.is_file() and "__pycache__" not in f.parts and f.suffix != ".pyc"]
     for file in sorted([*files, ROOT / "environment.txt"]):
         if file.is_file():
             digest.update(file.relative_to(ROOT).as_posix().encode() + b"\0" + file.read_bytes())
-    return digest.hexdigest()[:16]
+    return digest.digest()
+
+
+def execution_key(path, library: bytes | None = None) -> str:
+    """The key of a reader's-mode execution of notebook ``path``: the notebook and the
+    :func:`library_digest` (``library``: computed once by a run of several notebooks)."""
+    return hashlib.sha256(Path(path).read_bytes() + (library or library_digest())).hexdigest()[:16]
 
 
 def _cached_execution(stem: str, key: str) -> Path | None:
@@ -224,6 +230,7 @@ def run_notebooks(names=(), full: bool = False, destination=None, timeout: int |
     paths = notebook_paths(names)
     destination = Path(destination or published_results()).absolute()
     mode = "full" if full else "reader"
+    library = None if full else library_digest()  # the same for every notebook of this run
     done = {}
     with staged_folder(destination, keep_existing=True, what="notebook output folder") as stage, \
             tempfile.TemporaryDirectory(prefix="tpvp-reader-") as fresh:
@@ -235,7 +242,7 @@ def run_notebooks(names=(), full: bool = False, destination=None, timeout: int |
         for path in paths:
             output = stage.folder / path.stem
             shutil.rmtree(output, ignore_errors=True)  # hard links of the old copy: the published one stays
-            key = None if full else execution_key(path)
+            key = None if full else execution_key(path, library)
             kept = _cached_execution(path.stem, key) if key and reuse else None
             if kept is not None:
                 entry = json.loads((kept / EXECUTION).read_text())
