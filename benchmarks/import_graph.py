@@ -19,8 +19,8 @@ ROOT = Path(__file__).resolve().parent.parent / "tpvp"
 DATA_TOOLS = ROOT.parent / "data_tools"  # above the library: it may load foundations and stages only
 BENCHMARKS = Path(__file__).resolve().parent
 OWN = ("tpvp", "data_tools")
-TOP = ("cli", "cli_common", "__main__", "experiments", "session")  # may import anything below them
-ABOVE_STAGES = ("config", "pipeline", "learning", "experiments", "session", "cli", "cli_common", "__main__")
+TOP = ("cli", "cli_common", "commands", "__main__", "experiments", "session")  # may import anything below them
+ABOVE_STAGES = ("config", "pipeline", "learning", "experiments", "session", "cli", "cli_common", "commands", "__main__")
 
 
 def module_name(path: Path) -> str:
@@ -65,12 +65,12 @@ def upward(source: str, target: str) -> bool:
     if target.startswith("data_tools"):
         return not source.startswith("data_tools")  # the library never loads the data tools
     if source.startswith("data_tools"):  # the layers that plan or run experiments are not theirs
-        return layer(target) in ("config", "pipeline", "learning", "experiments", "session", "cli", "cli_common")
+        return layer(target) in ("config", "pipeline", "learning", "experiments", "session", "cli", "cli_common", "commands")
     src, dst = layer(source), layer(target)
     if src in TOP:
         return False
     if src == "learning":
-        return dst in ("experiments", "cli", "__main__")
+        return dst in ("experiments", "cli", "commands", "__main__")
     if src == "pipeline":  # above the stages and their configuration, below what runs it
         return dst in ABOVE_STAGES and dst not in ("config", "pipeline")
     return dst in ABOVE_STAGES

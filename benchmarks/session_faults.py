@@ -196,7 +196,7 @@ def count_steps(kind: str, folder: Path, paths: dict) -> int:
     """The write steps of the step (its files, the commit's renames, the moment after), counted in
     this process on a scratch copy."""
     from tpvp.io import faults
-    from tpvp.session.cli import main
+    from tpvp.cli import main
 
     copy_session(paths["one" if kind == "add" else "ready"], folder)
     with faults.inject(None), contextlib.redirect_stdout(None), contextlib.redirect_stderr(None):

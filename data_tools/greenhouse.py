@@ -42,7 +42,7 @@ from tpvp.io import READ_EXTENSIONS, atomic_write_bytes, atomic_write_text, clou
 from tpvp.io.publish import check_outputs_outside_inputs, staged_folder
 from tpvp.scene.boxes import DATA_DIR as BUNDLED_CONFIG_DIR
 from tpvp.scene.boxes import OrientedBox, read_bbx_config
-from tpvp.viz import plot_row_sessions
+from tpvp.viz.figures import plot_row_sessions
 
 PROCESSED_FOLDER = "Processed_3D_Model"
 SESSION_NAME = re.compile(r"(?P<site>room\d+)[_\-. /]?(?P<date>20\d\d-?\d\d-?\d\d)", re.IGNORECASE)

@@ -27,6 +27,32 @@ def test_version(capsys):
     assert info.value.code == 0 and capsys.readouterr().out.strip() == f"tpvp {__version__}"
 
 
+def _loaded_after(code: str) -> list[str]:
+    """The heavy packages and tpvp command modules a fresh Python has loaded after ``code``."""
+    probe = (f"import sys\n{code}\nprint(sorted(m for m in sys.modules if m.split('.')[0] in "
+             "('numpy', 'scipy', 'numba', 'pandas', 'matplotlib', 'rerun', 'torch', 'open3d') or "
+             "m.startswith('tpvp.commands')))")
+    done = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True)
+    return eval(done.stdout.strip().splitlines()[-1])
+
+
+def test_help_loads_no_command_and_no_numeric_package():
+    """``tpvp --help`` builds the command list from tpvp.cli.COMMANDS alone (a few hundredths of
+    a second; benchmarks/first_run.py times it)."""
+    from tpvp.cli import COMMANDS, build_parser
+
+    assert _loaded_after("from tpvp.cli import main\ntry: main(['--help'])\nexcept SystemExit: pass") == []
+    listed = build_parser(None).format_help()
+    assert all(name in listed for name in COMMANDS)
+
+
+def test_plan_loads_neither_matplotlib_nor_rerun():
+    """The plan's figures and recording are drawn by the drawing process (tpvp.viz.background)."""
+    loaded = _loaded_after("from tpvp.cli import build_parser\nbuild_parser('plan')")
+    assert "tpvp.commands.plant" in loaded and "numpy" in loaded
+    assert not [m for m in loaded if m.startswith(("matplotlib", "rerun"))], loaded
+
+
 def test_config_command_prints_a_loadable_resolved_configuration(tmp_path, capsys):
     assert main(["config", "--set", "gt_resolution=0.001", "--view-space", "sphere", "--derived"]) == 0
     out = capsys.readouterr().out

@@ -33,7 +33,8 @@ def test_no_upward_import(report):
 def test_the_data_tools_import_neither_the_planner_nor_the_experiments(report):
     tools = [module for module in report.graph if module.startswith("data_tools")]
     assert "data_tools.greenhouse" in tools
-    above = ("tpvp.config", "tpvp.pipeline", "tpvp.learning", "tpvp.experiments", "tpvp.session", "tpvp.cli")
+    above = ("tpvp.config", "tpvp.pipeline", "tpvp.learning", "tpvp.experiments", "tpvp.session", "tpvp.cli",
+             "tpvp.commands")
     for module in tools:
         assert [m for m in report.graph[module] if m.startswith(above)] == [], module
 

@@ -32,7 +32,7 @@ def png_size(path: Path) -> tuple[int, int]:
 
 
 def test_plot_coverage_draws_all_classes(tmp_path):
-    from tpvp.viz import plot_coverage
+    from tpvp.viz.figures import plot_coverage
 
     rng = np.random.default_rng(0)
     centres = rng.uniform(-0.1, 0.1, (600, 3))
@@ -65,7 +65,7 @@ def test_a_paper_figure_draws_its_point_clouds_as_images_in_the_pdf(tmp_path):
 
 
 def test_plot_plan_old_and_new_keywords(tmp_path):
-    from tpvp.viz import plot_plan
+    from tpvp.viz.figures import plot_plan
 
     rng = np.random.default_rng(1)
     plant = rng.uniform(-0.1, 0.1, (500, 3))
@@ -87,7 +87,7 @@ def test_plot_plan_old_and_new_keywords(tmp_path):
 
 
 def test_plot_depth_images(tmp_path):
-    from tpvp.viz import plot_depth_images
+    from tpvp.viz.figures import plot_depth_images
 
     depth = np.full((36, 64), np.inf)
     depth[10:20, 20:40] = np.linspace(0.3, 0.5, 20)

@@ -311,3 +311,48 @@ def test_passive_fields_of_view_meet_the_mid_plane_where_the_pinhole_puts_them(t
     room.initial_positions, room.initial_look_ats = room.initial_positions[:1], room.initial_look_ats[:1]
     assert plot_passive_sweep(tmp_path / "sweep.png", room, np.random.default_rng(0).random((50, 3)) - 0.5,
                               D435).stat().st_size > 0
+
+
+def test_a_new_candidate_source_and_route_are_one_registration_each(scene):
+    """A row candidate source (a look-at prior) and a route added through the public hooks are
+    chosen by name in the configuration; the pipeline needs nothing else."""
+    from tpvp.config import with_overrides
+    from tpvp.path.route import ROW_ROUTES
+    from tpvp.path.tsp import band_path
+
+    @LOOK_AT_PRIORS.register("toy-centre", "every view looks at the plant box's centre")
+    def toy_centre(context, targets, seed):
+        centre = np.asarray(context.room.plant_box.center, dtype=np.float64)
+        return round_robin_views(np.repeat(centre[None], 4, axis=0), context.room.candidate_positions,
+                                 targets.rounds, seed, "toy-centre")
+
+    @ROW_ROUTES.register("toy-lower-first", "the band path, lower band first")
+    def lower_first(positions, split_height, start_position, config):
+        return band_path(positions, split_height=split_height, start_position=start_position, first="lower",
+                         config=config)
+
+    try:
+        config = with_overrides(QUICK, {"candidates": "toy-centre", "route": "toy-lower-first"})
+        result = greenhouse.run_row_case(scene, config)
+        assert np.allclose(result.candidates.look_ats, scene.room.plant_box.center)
+        assert len(result.candidates) == 4 * QUICK.targets.rounds
+        split = scene.room.view_box.center[2]
+        heights = result.positions[:, 2]
+        if (heights < split).any():
+            assert heights[0] < split  # the toy route visits the lower band first
+        assert result.coverage_passive < result.coverage <= 1.0
+        with pytest.raises(ConfigError, match="unknown row route 'nowhere'; choose one of band, open, toy-lower-first"):
+            with_overrides(QUICK, {"route": "nowhere"})
+    finally:
+        LOOK_AT_PRIORS.unregister("toy-centre")
+        ROW_ROUTES.unregister("toy-lower-first")
+
+
+def test_the_open_route_is_one_band(scene):
+    from tpvp.pipeline.row import plan_path
+
+    positions = scene.room.candidate_positions[::40]
+    band, _ = plan_path(scene.room, positions, QUICK.path)
+    one, length = plan_path(scene.room, positions, QUICK.path, route="open")
+    assert len(one.bands[1]) == 0 and sorted(one.order) == sorted(band.order) == list(range(len(positions)))
+    assert length == pytest.approx(one.length + scene.room.passive_cost)

@@ -13,7 +13,7 @@ from helpers import benchmark_module, tree_digest
 from tpvp.errors import BusyError
 from tpvp.io import read_point_cloud
 from tpvp.session import Session
-from tpvp.session.cli import main
+from tpvp.cli import main
 
 session_faults = benchmark_module("session_faults")
 

@@ -184,14 +184,9 @@ def main() -> int:
 
 
 def _load_main():
-    # Imported after the dependency check (a missing package is one line, not a traceback); a
-    # session step loads only the session's command line, not the experiments.
-    if sys.argv[1:2] == ["session"]:
-        from tpvp.session.cli import main  # the session commands alone: a step in about a second
-    else:
-        from tpvp.cli import main  # every command
-    return main
+    from tpvp.cli import prepare  # after the dependency check: a missing package is one line
 
+    return prepare()  # loads the command's own modules and parses its options
 
 if __name__ == "__main__":
     sys.exit(main())

@@ -19,14 +19,17 @@ COVERAGE_TARGET_HELP = ("true coverage of today's plants to aim for, e.g. 0.98: 
                         "1.0 = the paper's full set cover (default: the configuration's, 1.0)")
 
 
-def command_name(args) -> str:
-    """``tpvp plan``, ``tpvp session add``: how a command's error lines begin."""
-    return " ".join(["tpvp", args.command, *([args.step] if getattr(args, "step", None) else [])])
-
-
 def print_warnings(warnings) -> None:
     for warning in warnings:
         print(f"tpvp: warning: {warning}", file=sys.stderr)
+
+
+def print_rows(rows, folder, files: str) -> None:
+    """A case's figures as aligned ``name  value`` lines, then what was written where."""
+    width = max(len(k) for k, _ in rows)
+    for key, value in rows:
+        print(f"  {key:<{width}}  {value}")
+    print(f"wrote {folder}/ ({files})")
 
 
 def resolved_config(args):
@@ -68,7 +71,6 @@ def view_space_arg(value: str) -> str:
     except TpvpError as exc:
         raise argparse.ArgumentTypeError(str(exc)) from None
     return value
-
 
 
 def case_options(p, output, case_options=True, frontier=True) -> None:

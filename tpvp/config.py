@@ -29,6 +29,7 @@ from tpvp.inflation.weights import SurfaceWeightsConfig
 from tpvp.nbv import OccupancyMapConfig
 from tpvp.nbv.blockwise import BlockwiseNbvConfig
 from tpvp.nbv.methods import NBV_METHODS
+from tpvp.path.route import ROW_ROUTES
 from tpvp.path.tsp import TspConfig
 from tpvp.registration import EDConfig
 from tpvp.registration.methods import REGISTRATION_METHODS
@@ -37,6 +38,7 @@ from tpvp.sensor.sensor import ROW_RANGE, SensorConfig
 from tpvp.setcover import SetCoverConfig
 from tpvp.setcover.methods import SELECTION_METHODS
 from tpvp.viewspace import get_view_space
+from tpvp.viewspace.priors import LOOK_AT_PRIORS
 
 SCALES = ("normalised", "native")
 UP_AXES = ("+z", "-z", "+y", "-y", "+x", "-x")
@@ -372,7 +374,10 @@ class RowConfig:
     pose_noise: the Table VII study; blockwise: the Block-wise NBV baseline. coarse: what an
     observed voxel adds to the passive reconstruction Q: ``centroids`` (the points seen in it,
     reduced to their centroid, as the authors' reference is) or ``centres`` (its centre: all a depth
-    image of the simulator's voxel geometry can give, see ``tpvp session``).
+    image of the simulator's voxel geometry can give, see ``tpvp session``). candidates: where Ours'
+    candidate views look (a look-at prior of :data:`tpvp.viewspace.priors.LOOK_AT_PRIORS`; the
+    paper's ``transfer``); route: how the selected views are ordered
+    (:data:`tpvp.path.route.ROW_ROUTES`; the paper's ``band``).
     """
 
     name: str = "paper-row"
@@ -394,6 +399,8 @@ class RowConfig:
     pose_noise: PoseNoiseConfig = field(default_factory=PoseNoiseConfig)
     blockwise: BlockwiseNbvConfig = field(default_factory=BlockwiseNbvConfig)
     coarse: str = "centroids"
+    candidates: str = "transfer"
+    route: str = "band"
 
     setting = "row"
 
@@ -402,6 +409,8 @@ class RowConfig:
         _integer(self, "seed", minimum=0)
         if self.coarse not in COARSE_POINTS:
             raise ConfigError(f"coarse must be one of {', '.join(COARSE_POINTS)}, got {self.coarse!r}")
+        LOOK_AT_PRIORS.get(self.candidates)  # one line naming the choices
+        ROW_ROUTES.get(self.route)
 
 
 SETTINGS = {"plant": PlantConfig, "row": RowConfig}

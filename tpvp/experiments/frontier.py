@@ -21,7 +21,7 @@ from tpvp.experiments.single_plant import Scene, known, run_case, transfer
 from tpvp.pipeline.plant import planning_surface
 from tpvp.io import atomic_write_text
 from tpvp.io.publish import staged_folder
-from tpvp.viz.experiments import plot_frontier
+from tpvp.viz.background import draw
 
 DEFAULT_TARGETS = (0.90, 0.92, 0.94, 0.95, 0.96, 0.97, 0.98, 0.99, 0.995, 1.0)
 FRONTIER_COLUMNS = ("target", "views", "coverage", "path_length_m", "selection_optimal", "optimum_views",
@@ -51,12 +51,13 @@ def coverage_frontier(scene: Scene, config: PlantConfig, targets=DEFAULT_TARGETS
     return pd.DataFrame(rows, columns=list(FRONTIER_COLUMNS))
 
 
-def write_frontier_files(folder, frontier: pd.DataFrame, title: str = "") -> dict:
+def write_frontier_files(folder, frontier: pd.DataFrame, title: str = "", pool=None) -> dict:
     """``frontier.csv`` and ``frontier.png`` of a :func:`coverage_frontier` table in ``folder``
-    (each file written atomically; ``folder`` is usually a staged output folder)."""
+    (each file written atomically; ``folder`` is usually a staged output folder; the figure drawn
+    in ``pool``, :func:`tpvp.viz.background.drawing_pool`, when one is given)."""
     folder = Path(folder)
     atomic_write_text(folder / "frontier.csv", frontier.to_csv(index=False))
-    plot_frontier(folder / "frontier.png", frontier, title)
+    draw([("tpvp.viz.experiments:plot_frontier", (folder / "frontier.png", frontier, title), {})], pool)
     return {"table": frontier, "csv": folder / "frontier.csv", "figure": folder / "frontier.png"}
 
 

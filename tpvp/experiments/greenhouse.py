@@ -162,12 +162,12 @@ def upper_limit(scene: RowScene, truth) -> float:
 def random_selection(scene: RowScene, candidates: CandidateViews, truth, budget: int, repetition: int,
                      config: RowConfig = RowConfig(), with_passive: bool = True) -> dict:
     """A random one-shot baseline: ``budget`` of the candidates drawn uniformly (seeded by the
-    configuration's seed and ``repetition``), the same band path, executed. Views and path include
+    configuration's seed and ``repetition``), the same route as Ours, executed. Views and path include
     the passive sweep when ``with_passive`` (PriorPassive/PriorTransfer use it; PriorOBB does not)."""
     rng = np.random.default_rng([config.seed, int(repetition), int(budget)])
     chosen = rng.choice(len(candidates), size=min(int(budget), len(candidates)), replace=False)
     t = time.perf_counter()
-    path, length = plan_path(scene.room, candidates.positions[chosen], config.path, with_passive)
+    path, length = plan_path(scene.room, candidates.positions[chosen], config.path, with_passive, config.route)
     seconds = time.perf_counter() - t
     coverage = row_coverage(scene, covered_voxels(truth, chosen), with_passive)
     n_passive = len(scene.room.initial_positions) if with_passive else 0

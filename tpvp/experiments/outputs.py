@@ -9,7 +9,6 @@ import numpy as np
 from tpvp.experiments import single_plant
 from tpvp.experiments.greenhouse import execute
 from tpvp.pipeline.outputs import Measured, write_plan_outputs, write_row_plan_outputs
-from tpvp.viz import plot_coverage
 from tpvp.viz.geometry import plan_geometry
 from tpvp.viz.interactive import scene_3d
 
@@ -31,25 +30,28 @@ def plan_3d(scene, result, title: str = ""):
                     title=title or f"{result.n_views} views, {100 * result.coverage:.2f} % coverage")
 
 
-def write_case_outputs(folder, scene, result, config, name: str = "case", extra_summary: dict | None = None) -> dict:
+def write_case_outputs(folder, scene, result, config, name: str = "case", extra_summary: dict | None = None,
+                       pool=None) -> dict:
     """The planner's outputs of a simulated plant case (:func:`tpvp.pipeline.outputs.write_plan_outputs`)
     with the oracle's size, the coverages and the coverage figure of the ground-truth voxels."""
     def coverage_figure(folder):
         geometry = plan_geometry(scene, result)
         plant = scene.grid.countable
-        return [plot_coverage(folder / "coverage.png", scene.grid.centres[plant], geometry["covered"][plant],
-                              geometry["observable"][plant], f"{name}: ground-truth voxels "
-                              f"({1e3 * config.gt_resolution:g} mm, planning frame)")]
+        return [("tpvp.viz.figures:plot_coverage", (folder / "coverage.png", scene.grid.centres[plant], geometry["covered"][plant],
+                                 geometry["observable"][plant], f"{name}: ground-truth voxels "
+                                 f"({1e3 * config.gt_resolution:g} mm, planning frame)"), {})]
     measured = Measured({"oracle_voxels": int(len(scene.oracle))}, scene.current, coverage_figure)
-    return write_plan_outputs(folder, single_plant.known(scene), result, config, name, extra_summary, measured)
+    return write_plan_outputs(folder, single_plant.known(scene), result, config, name, extra_summary, measured,
+                              pool)
 
 
-def write_row_case_outputs(folder, scene, result, config, name: str = "row case", extra_summary: dict | None = None) -> dict:
+def write_row_case_outputs(folder, scene, result, config, name: str = "row case", extra_summary: dict | None = None,
+                           pool=None) -> dict:
     """The planner's outputs of a simulated row case (:func:`tpvp.pipeline.outputs.write_row_plan_outputs`)
     with the oracle's size and whether it came from the cache, and the coverages."""
     measured = Measured({"oracle_voxels": int(len(scene.oracle)), "oracle_from_cache": scene.oracle_cached},
                         scene.current)
-    return write_row_plan_outputs(folder, scene.known, result, config, name, extra_summary, measured)
+    return write_row_plan_outputs(folder, scene.known, result, config, name, extra_summary, measured, pool)
 
 
 def row_plan_3d(scene, result, title: str = ""):

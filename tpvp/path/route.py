@@ -1,12 +1,14 @@
-"""The robot's whole route: the executed views in order, then the shortest open path through the
-selected ones, around the plant's obstacle sphere."""
+"""The robot's whole route. A plant's: the executed views in order, then the shortest open path
+through the selected ones, around the plant's obstacle sphere. A row's: the selected views ordered
+by a route chosen by name (:data:`ROW_ROUTES`)."""
 
 from __future__ import annotations
 
 import numpy as np
 
 from tpvp.path.local import local_path_lengths, obstacle_radius
-from tpvp.path.tsp import shortest_open_path
+from tpvp.path.tsp import BandPathResult, TspConfig, band_path, shortest_open_path
+from tpvp.registry import Registry
 
 
 def path_through(space, executed, selected, coarse, config):
@@ -21,3 +23,20 @@ def path_through(space, executed, selected, coarse, config):
     warm_up_path = float(np.trace(local_path_lengths(space.positions[executed], centre, radius), offset=1)) \
         if len(executed) > 1 else 0.0
     return planned, warm_up_path + tsp.length, tsp, radius
+
+
+#: How a row's selected views are ordered (``RowConfig.route``): name -> function
+#: ``(positions, split_height, start_position, TspConfig) -> BandPathResult``.
+ROW_ROUTES = Registry("row route")
+
+
+@ROW_ROUTES.register("band", "the paper's: an open path in each height band (split at the view box's mid height), "
+                             "upper band first, joined at the lower band's nearest view", default=True)
+def band_route(positions, split_height: float, start_position, config: TspConfig) -> BandPathResult:
+    return band_path(positions, split_height=split_height, start_position=start_position, config=config)
+
+
+@ROW_ROUTES.register("open", "one open path through every view from the start, heights mixed")
+def open_route(positions, split_height: float, start_position, config: TspConfig) -> BandPathResult:
+    lowest = float(np.min(np.asarray(positions, dtype=np.float64).reshape(-1, 3)[:, 2], initial=np.inf))
+    return band_path(positions, split_height=lowest, start_position=start_position, config=config)

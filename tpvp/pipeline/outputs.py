@@ -20,20 +20,20 @@ from tpvp.io import atomic_write_text
 from tpvp.io.plan import plan_table, write_plan
 from tpvp.provenance import provenance
 from tpvp.sensor.camera import look_at_rotations, rotation_to_quaternion
-from tpvp.viz import plot_plan, write_recording
+from tpvp.viz.background import draw
 from tpvp.viz.geometry import path_polyline
-from tpvp.viz.rows import plot_row_paths
 
 
 @dataclass(frozen=True, eq=False)
 class Measured:
     """What a simulated run measured of its plan on the ground truth: ``summary`` entries (the
     oracle's size, ...), today's plant (``plant``: drawn under the plan, recorded) and a function
-    that writes its own figures into the run's folder (returns their paths)."""
+    that lists the drawings of its own figures in the run's folder (:func:`tpvp.viz.background.draw`
+    calls, each returning its file's path)."""
 
     summary: dict
     plant: np.ndarray
-    figures: object = field(default=lambda folder: [])
+    figures: object = field(default=lambda folder: [])  # folder -> drawing calls (tpvp.viz.background)
 
 
 def _results(result, measured: Measured | None) -> dict:
@@ -68,10 +68,12 @@ def plan_frames(known, order, roles) -> tuple[dict, dict, dict]:
 
 
 def write_plan_outputs(folder, known, result, config, name: str = "case", extra_summary: dict | None = None,
-                       measured: Measured | None = None) -> dict:
+                       measured: Measured | None = None, pool=None) -> dict:
     """A plant plan (:class:`tpvp.pipeline.plant.CaseResult` planned on ``known``): results (JSON +
     CSV), the plan in both frames, ``config.yaml`` + ``provenance.json``, the plan figure and a
-    rerun ``.rrd`` in ``folder``. Without ``measured`` the plan figure shows what was captured."""
+    rerun ``.rrd`` in ``folder``. Without ``measured`` the plan figure shows what was captured.
+    The figures and the recording are drawn in ``pool`` (:func:`tpvp.viz.background.drawing_pool`)
+    when one is given."""
     folder = Path(folder)
     order = result.order
     roles = ["initial"] + ["warm-up NBV"] * (len(result.executed_views) - 1) + ["planned"] * len(result.planned_views)
@@ -91,32 +93,34 @@ def write_plan_outputs(folder, known, result, config, name: str = "case", extra_
     positions = space.positions[order]
     polyline = path_polyline(positions, *result.obstacle)
     shown = measured.plant if measured else result.clouds["coarse"]
-    figures = [plot_plan(folder / "plan.png", shown, space.positions, positions[:len(result.executed_views)],
-                         space.positions[result.planned_views], polyline, f"{name}: {result.n_views} views"
-                         + (f", {100 * result.coverage:.2f}% coverage, {result.path_length:.2f} m path" if measured
-                            else f", {result.path_length / known.scan_scale:.3g} m path in the world frame "
-                                 f"(drawn in the planning frame)"), obstacle=result.obstacle,
-                         table_points=known.table_points if len(known.table_points) else None)]
-    figures += measured.figures(folder) if measured else []
+    calls = [("tpvp.viz.figures:plot_plan", (folder / "plan.png", shown, space.positions, positions[:len(result.executed_views)],
+                          space.positions[result.planned_views], polyline, f"{name}: {result.n_views} views"
+                          + (f", {100 * result.coverage:.2f}% coverage, {result.path_length:.2f} m path" if measured
+                             else f", {result.path_length / known.scan_scale:.3g} m path in the world frame "
+                                  f"(drawn in the planning frame)")),
+              {"obstacle": result.obstacle,
+               "table_points": known.table_points if len(known.table_points) else None})]
+    calls += measured.figures(folder) if measured else []
     truth = {"current_truth": (measured.plant, (120, 120, 120))} if measured else {}
-    rrd = write_recording(
-        folder / "recording.rrd",
+    calls.append(("tpvp.viz.recording:write_recording", (folder / "recording.rrd",), dict(
         clouds={**truth, "previous": (result.clouds["previous"], (220, 60, 60)),
                 "coarse": (result.clouds["coarse"], (40, 90, 220)), "transferred": (result.clouds["warped"], (230, 140, 30)),
                 "inflation": (result.clouds["inflation"], (40, 180, 60))},
         cameras={"warm_up_views": (positions[:len(result.executed_views)], space.look_ats[result.executed_views]),
                  "planned_views": (space.positions[result.planned_views], space.look_ats[result.planned_views])},
-        paths={"global_path": polyline})
+        paths={"global_path": polyline})))
+    *figures, rrd = draw(calls, pool)
     return {"results": folder / "results.json", "plan": plans["scan"], "plan_normalised": plans["normalised"],
             "plan_json": plans["json"], "config": folder / "config.yaml", "provenance": folder / "provenance.json",
             "figures": figures, "recording": rrd}
 
 
 def write_row_plan_outputs(folder, known, result, config, name: str = "row case", extra_summary: dict | None = None,
-                           measured: Measured | None = None) -> dict:
+                           measured: Measured | None = None, pool=None) -> dict:
     """A row plan (:class:`tpvp.pipeline.row.RowCaseResult` planned on ``known``): results (JSON +
     CSV), the plan (passive sweep then the planned views, world frame), ``config.yaml`` +
-    ``provenance.json``, the path from the top and the side, and a rerun ``.rrd``."""
+    ``provenance.json``, the path from the top and the side, and a rerun ``.rrd`` (drawn in ``pool``
+    when one is given)."""
     folder = Path(folder)
     room = known.room
     positions = np.concatenate([room.initial_positions, result.positions])
@@ -132,20 +136,21 @@ def write_row_plan_outputs(folder, known, result, config, name: str = "row case"
                **_results(result, measured), **(extra_summary or {})}
     _write_results(folder, summary, config, "tpvp greenhouse", {"seed": config.seed})
     coverage = f"{100 * result.coverage:.2f} % coverage, " if measured else ""
-    plan_png = plot_row_paths(folder / "plan.png", room.plant_box, measured.plant if measured else known.coarse,
-                              {"Ours": (result.positions, f"{result.n_views} views (15 passive), "
-                                        f"{coverage}{result.path_length:.1f} m")},
-                              f"{name}: planned path (plant-box frame)")
     transfer = result.transfer
     truth = {"current_truth": (measured.plant, (120, 120, 120))} if measured else {}
-    rrd = write_recording(
-        folder / "recording.rrd",
-        clouds={**truth, "previous": (known.previous, (220, 60, 60)),
-                "coarse": (transfer.coarse, (40, 90, 220)), "transferred": (transfer.alignment.warped, (230, 140, 30)),
-                "inflation": (transfer.inflation.inflation, (40, 180, 60))},
-        cameras={"passive_views": (room.initial_positions, room.initial_look_ats),
-                 "planned_views": (result.positions, result.look_ats)},
-        paths={"band_path": np.concatenate([room.initial_positions[-1:], result.positions])})
+    plan_png, rrd = draw([
+        ("tpvp.viz.rows:plot_row_paths", (folder / "plan.png", room.plant_box,
+                                          measured.plant if measured else known.coarse,
+                                          {"Ours": (result.positions, f"{result.n_views} views (15 passive), "
+                                                    f"{coverage}{result.path_length:.1f} m")},
+                                          f"{name}: planned path (plant-box frame)"), {}),
+        ("tpvp.viz.recording:write_recording", (folder / "recording.rrd",), dict(
+            clouds={**truth, "previous": (known.previous, (220, 60, 60)), "coarse": (transfer.coarse, (40, 90, 220)),
+                    "transferred": (transfer.alignment.warped, (230, 140, 30)),
+                    "inflation": (transfer.inflation.inflation, (40, 180, 60))},
+            cameras={"passive_views": (room.initial_positions, room.initial_look_ats),
+                     "planned_views": (result.positions, result.look_ats)},
+            paths={"band_path": np.concatenate([room.initial_positions[-1:], result.positions])}))], pool)
     return {"results": folder / "results.json", "plan": plans["world"], "plan_json": plans["json"],
             "config": folder / "config.yaml", "provenance": folder / "provenance.json", "figures": [plan_png],
             "recording": rrd}

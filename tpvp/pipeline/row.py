@@ -4,7 +4,7 @@ What it knows (:class:`RowKnown`): the room (its boxes, the passive sweep's 15 v
 previous session, the coarse reconstruction Q the passive sweep captured with the camera that saw
 each point, and the sensor. From that: registration of the previous session onto Q -> voxel
 inflation -> PriorTransfer look-at targets and their candidate 6D views (round robin) ->
-visibility on the planning surface -> set cover with the passive views as executed -> band path
+visibility on the planning surface -> set cover with the passive views as executed -> route
 from the end of the sweep. The simulator's ground truth is not here: the simulation
 (:mod:`tpvp.experiments.greenhouse`) captures the sweep and executes the plan on it, a real
 session (:mod:`tpvp.session.row`) captures them.
@@ -21,7 +21,8 @@ import numpy as np
 from tpvp.config import RowConfig
 from tpvp.errors import PointCloudError
 from tpvp.inflation import inflate_voxels
-from tpvp.path.tsp import TspConfig, band_path
+from tpvp.path.route import ROW_ROUTES
+from tpvp.path.tsp import TspConfig
 from tpvp.registration.methods import register
 from tpvp.scene import voxels
 from tpvp.scene.grid import build_grid
@@ -101,12 +102,13 @@ def transfer(known: RowKnown, config: RowConfig = RowConfig(), progress=None) ->
                                                        "inflation": time.perf_counter() - t})
 
 
-def plan_path(room, positions, config: TspConfig = TspConfig(), with_passive: bool = True):
-    """Band path over the views in ``room`` (split at the view box's mid height), from where the passive sweep
-    ends when it ran; returns the band path result and the reported length (sweep included)."""
+def plan_path(room, positions, config: TspConfig = TspConfig(), with_passive: bool = True, route: str = "band"):
+    """The path over the views in ``room`` by ``route`` (:data:`tpvp.path.route.ROW_ROUTES`; bands
+    split at the view box's mid height), from where the passive sweep ends when it ran; returns the
+    path result and the reported length (sweep included)."""
     split = float(room.view_box.center[2])
     start = np.asarray(room.initial_positions[-1]) if with_passive else None
-    result = band_path(positions, split_height=split, start_position=start, config=config)
+    result = ROW_ROUTES.get(route)(positions, split, start, config)
     return result, result.length + (room.passive_cost if with_passive else 0.0)
 
 
@@ -203,15 +205,16 @@ class RowCaseResult:
 def plan(known: RowKnown, config: RowConfig = RowConfig(), transferred: RowTransfer | None = None,
          progress=None) -> RowCaseResult:
     """Ours on what the robot knows of a row, one block per stage: transfer (unless given), the
-    transfer prior's candidates, their visibility on the planning surface, set cover with the
-    passive views as executed, band path from the end of the passive sweep. The coverages are NaN:
+    candidates of the configuration's look-at prior (the paper's ``transfer``), their visibility
+    on the planning surface, set cover with the passive views as executed, the configuration's
+    route (the paper's band path) from the end of the passive sweep. The coverages are NaN:
     the planner has no ground truth (the simulation measures them)."""
     say = progress or (lambda stage: None)
     transferred = transferred or transfer(known, config, progress)
     timings = dict(known.timings) | dict(transferred.timings)
     with timed(timings, "targets", say, "look-at targets"):
         context = known.prior_context(config.inflation.step, transferred)
-        candidates = candidate_views("transfer", context, config.targets, config.seed)
+        candidates = candidate_views(config.candidates, context, config.targets, config.seed)
     with timed(timings, "visibility", say, "visibility"):
         visibility = planning_visibility(known.room, candidates, transferred.inflation.planning,
                                          config.selection.cover_resolution, config.sensor)
@@ -220,7 +223,7 @@ def plan(known: RowKnown, config: RowConfig = RowConfig(), transferred: RowTrans
         selection = select_views(problem, config.selection)
         chosen = visibility.candidate_ids(selection)
     with timed(timings, "path", say, "path"):
-        path, length = plan_path(known.room, candidates.positions[chosen], config.path)
+        path, length = plan_path(known.room, candidates.positions[chosen], config.path, route=config.route)
         selected = chosen[path.order]
     timings["planning"] = sum(timings[k] for k in PLANNING_STAGES)
     return RowCaseResult(candidates, selected, path, float("nan"), float("nan"),

@@ -1,7 +1,6 @@
 """``tpvp session start|add|plan|export|check``: a real session on the command line (docs/session.md).
 
-Parsed here, without the experiments: ``python -m tpvp session ...`` loads only this module and the
-session package, so a step costs little more than its own work. Each step holds the session
+Loaded alone by :mod:`tpvp.cli`, without the experiments: a step costs little more than its own work. Each step holds the session
 folder from its read to its commit (another command waits up to ``--wait`` seconds, then exit 3),
 and is complete once committed: a Ctrl-C or SIGTERM after the commit is reported, not obeyed
 (exit 0, the step's own lines printed).
@@ -16,10 +15,9 @@ import signal
 import sys
 from pathlib import Path
 
-from tpvp import __version__
-from tpvp.cli_common import command_name, COVERAGE_TARGET_HELP, case_options, print_warnings, resolved_config
+from tpvp.cli_common import COVERAGE_TARGET_HELP, case_options, print_warnings, resolved_config
 from tpvp.config import parse_overrides
-from tpvp.errors import InputFileError, TpvpError, install_warning_format, run_command
+from tpvp.errors import InputFileError, TpvpError
 from tpvp.io import read_point_cloud
 from tpvp.io.publish import RunInterrupted, arm_step, late_signals
 from tpvp.io.units import plant_size_warning
@@ -33,9 +31,7 @@ from tpvp.session.check import repair_folder
 WAIT_S = 60.0
 
 
-def add_session_parser(sub) -> None:
-    session = sub.add_parser("session", help="plan a real session: the previous model and the robot's first "
-                                             "captures, no ground truth (start, add, plan, export)")
+def session_arguments(session) -> None:
     steps = session.add_subparsers(dest="step", required=True)
     start = steps.add_parser("start", help="fix the world frame and the candidate views from the previous model; "
                                            "print the first pose to capture")
@@ -249,13 +245,3 @@ def _session_check(args) -> int:
     print(session.request().describe())
     _say_late_signals(args, "the folder was repaired")
     return 0
-
-
-def main(argv=None) -> int:
-    """``tpvp session ...`` alone (the full ``tpvp`` parser holds the same subcommand)."""
-    install_warning_format("tpvp")
-    parser = argparse.ArgumentParser(prog="tpvp")
-    parser.add_argument("--version", action="version", version=f"tpvp {__version__}")
-    add_session_parser(parser.add_subparsers(dest="command", required=True))
-    args = parser.parse_args(argv)
-    return run_command(args, command_name(args))

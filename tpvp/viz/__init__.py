@@ -1,4 +1,3 @@
-"""Figures (matplotlib, offscreen PNG) and rerun recordings of plans and results."""
-
-from tpvp.viz.figures import plot_coverage, plot_depth_images, plot_plan, plot_row_sessions  # noqa: F401
-from tpvp.viz.recording import write_recording  # noqa: F401
+"""Figures (matplotlib, offscreen PNG) and rerun recordings of plans and results. Import the
+module you need (``tpvp.viz.figures``, ``tpvp.viz.recording``, ...): the package itself loads
+nothing, so that a planner can name its drawings (``tpvp.viz.background``) without loading matplotlib."""

@@ -1,0 +1,85 @@
+"""``tpvp experiments plants|rows``: the paper's experiments, their tables and figures."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from tpvp.cli_common import case_options, resolved_config
+from tpvp.commands.rows import row_config, row_options
+from tpvp.experiments import plants as plant_experiments
+from tpvp.experiments import rows as row_experiments
+from tpvp.scene.boxes import ROOMS
+
+
+def _experiments_plants(args) -> int:
+    config = resolved_config(args)
+    cases = plant_experiments.default_cases(args.quick, args.dataset, args.plants, args.pairs, args.paper_subset,
+                                            tuple(args.view_spaces), tuple(args.rotations), tuple(args.initial_views))
+    methods = args.methods or list(plant_experiments.PLANT_METHODS.defaults())
+    where = f"the Dask cluster {args.scheduler}" if args.scheduler else f"{args.workers} local worker(s)"
+    print(f"{len(cases)} cases x {len(methods)} methods on {where}; cache {args.cache}")
+    raw = plant_experiments.run_experiments(cases, methods, config, cache_dir=args.cache, workers=args.workers,
+                                            scheduler=args.scheduler)
+    comparison = plant_experiments.comparison_case(cases) if args.comparison else None
+    written = plant_experiments.write_results(args.output, raw, config, comparison=comparison)
+    print(plant_experiments.markdown(written["table1_coverage_effort"]))
+    print(f"wrote {Path(args.output).absolute()}/ (raw_cases.csv, {', '.join(f'{n}.csv/.md' for n in written)}, "
+          f"paper_values.csv, figures/{', comparison/' if comparison else ''})")
+    return 0
+
+
+def _experiments_rows(args) -> int:
+    config = row_config(args)
+    cases = row_experiments.default_row_cases(args.quick, args.dataset, tuple(args.rooms),
+                                              references=args.reference or ["handheld"])
+    methods = args.methods or list(row_experiments.ALL_METHODS)
+    where = f"the Dask cluster {args.scheduler}" if args.scheduler else f"{args.workers} local worker(s)"
+    print(f"{len(cases)} cases x {len(methods)} methods on {where}; cache {args.cache}")
+    raw = row_experiments.run_row_experiments(cases, methods, config, cache_dir=args.cache, workers=args.workers,
+                                              scheduler=args.scheduler)
+    written = row_experiments.write_results(args.output, raw, config)
+
+    print(plant_experiments.markdown(written["table6_coverage_effort"]))
+    print(f"wrote {Path(args.output).absolute()}/ (raw_cases.csv, {', '.join(f'{n}.csv/.md' for n in written)}, "
+          f"paper_values.csv, figures/)")
+    return 0
+
+
+def experiments_arguments(experiments) -> None:
+    which = experiments.add_subparsers(dest="experiment", required=True)
+    plant = which.add_parser("plants", help="individual plants: Tables I-IV, every baseline, the exact optimum")
+    case_options(plant, "outputs/experiments/plants", case_options=False)
+    plant.add_argument("--dataset", type=Path, default=None,
+                       help="a folder written by `python -m data_tools pheno4d prepare` (default: generated "
+                            "tomato and maize pairs plus the bundled real pair, offline)")
+    plant.add_argument("--plants", nargs="+", default=None, help="only these plants of the dataset (e.g. Tomato01)")
+    plant.add_argument("--pairs", nargs="+", type=int, default=None, help="only these rows of the dataset's pairs.csv")
+    plant.add_argument("--paper-subset", action="store_true", help="plants 1-3 of each species, one pair each")
+    plant.add_argument("--view-spaces", nargs="+", default=["hemisphere", "sphere"], help="(default: %(default)s)")
+    plant.add_argument("--rotations", nargs="+", type=float, default=[0.0, 45.0], help="degrees about +Z (default: %(default)s)")
+    plant.add_argument("--initial-views", nargs="+", type=int, default=[17, 8, 21], help="(default: %(default)s)")
+    plant.add_argument("--methods", nargs="+", default=None,
+                       help=f"methods to run ({plant_experiments.PLANT_METHODS.describe()})")
+    plant.add_argument("--quick", action="store_true", help="a few cases: one tomato and one maize pair, rotation 0, view 17")
+    plant.add_argument("--workers", type=int, default=2, help="parallel processes (default: %(default)s)")
+    plant.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                       help="run the tasks on a Dask cluster, e.g. tcp://10.0.0.5:8786 (the cache folder must be "
+                            "shared with its workers; default: local processes)")
+    plant.add_argument("--no-comparison", dest="comparison", action="store_false",
+                       help="skip the comparison figure (GMC, Ours and the exact optimum on the first sphere case, "
+                            "with a rerun recording; about 30 s)")
+    plant.add_argument("--cache", default="outputs/cache/plants",
+                       help="cache folder of per-task rows; an interrupted run resumes (default: %(default)s)")
+    plant.set_defaults(func=_experiments_plants)
+    rows = which.add_parser("rows", help="greenhouse rows: Tables V-VI (Ours, random prior ladder, upper limits)")
+    row_options(rows, "outputs/experiments/rows", several_references=True)
+    rows.add_argument("--rooms", nargs="+", default=list(ROOMS), choices=ROOMS, help="(default: %(default)s)")
+    rows.add_argument("--methods", nargs="+", default=None,
+                      help=f"methods to run (default: {', '.join(row_experiments.ALL_METHODS)}; also: "
+                           f"{', '.join(sorted(set(row_experiments.ROW_METHODS.names()) - set(row_experiments.ALL_METHODS)))})")
+    rows.add_argument("--workers", type=int, default=2, help="parallel processes (default: %(default)s)")
+    rows.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                      help="run the tasks on a Dask cluster, e.g. tcp://10.0.0.5:8786 (default: local processes)")
+    rows.add_argument("--cache", default="outputs/cache/rows",
+                      help="cache folder of per-task rows and the oracles (default: %(default)s)")
+    rows.set_defaults(func=_experiments_rows)
