@@ -88,7 +88,7 @@ def measure(trees: list[Path], repeats: int, scratch: Path, cold: bool = True) -
             seconds, stdout = _run(tree, [*plan, "--output", str(out / "plan")], caches[tree])
             figures[tree]["warm plan"].append(seconds)
             results.setdefault(tree, _result(stdout))
-            results[tree] += "".join((out / "plan" / name).read_text() for name in PLAN_FILES) if r == 0 else ""
+            results[tree] += "".join("\n" + (out / "plan" / name).read_text() for name in PLAN_FILES) if r == 0 else ""
     return figures, results
 
 

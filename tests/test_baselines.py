@@ -263,6 +263,20 @@ def test_optimum(small_case):
             optimum(scene, config, targets=bad)
 
 
+def test_the_frontier_optimum_in_one_model_equals_each_target_alone(small_case):
+    from tpvp.experiments.baselines import optimum
+
+    scene, config = small_case
+    targets = (1.0, 0.8, 0.95, 0.9, 0.99)
+    alone = optimum(scene, config, targets=targets)
+    together = optimum(scene, config, targets=targets, shared=True)
+    assert together["target"].tolist() == alone["target"].tolist()
+    assert together["selection_optimal"].all() and alone["selection_optimal"].all()
+    assert together["views"].tolist() == alone["views"].tolist()
+    assert (together["coverage"] >= together["target"] - 1e-12).all()
+    assert together["status"].str.contains("one model for all targets").all()
+
+
 def test_coverage_frontier(small_case, tmp_path):
     from tpvp.experiments.frontier import FRONTIER_COLUMNS, coverage_frontier, write_frontier
     from tpvp.experiments.single_plant import run_case

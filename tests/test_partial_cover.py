@@ -8,7 +8,7 @@ from scipy import sparse
 
 from tpvp.errors import ConfigError
 from tpvp.setcover import SetCoverConfig, solve_set_cover
-from tpvp.setcover.partial import PartialCoverResult, partial_set_cover
+from tpvp.setcover.partial import PartialCoverResult, partial_set_cover, partial_set_covers
 from tpvp.solvers import SOLVERS
 
 
@@ -98,3 +98,39 @@ def test_partial_cover_bad_input():
         partial_set_cover(a, 1, weights=[1, 2])
     with pytest.raises(ConfigError, match="SetCoverConfig"):
         partial_set_cover(a, 1, config={"solver": "cbc"})
+
+
+def test_one_model_for_many_targets_equals_brute_force():
+    """The frontier's shared model (HiGHS, warm starts from the next larger target) finds each
+    target's optimum, in the order asked, with the model solving some of them."""
+    rng = np.random.default_rng(7)
+    solved = 0
+    for trial in range(8):
+        a = rng.random((10, 50)) < rng.uniform(0.1, 0.3)
+        executed = [int(rng.integers(10))]
+        weights = rng.uniform(0.5, 2.0, 50) if trial % 3 == 2 else None
+        total = float((np.ones(50) if weights is None else weights)[a.any(axis=0)].sum())
+        required = [round(f * total, 6) for f in (0.95, 0.6, 1.0, 0.8, 0.9)] + [total + 5]
+        results = partial_set_covers(sparse.csr_matrix(a), required, executed=executed, weights=weights)
+        for need, result in zip(required, results):
+            reachable = need <= total + 1e-9
+            assert result.reachable == reachable
+            assert result.objective == brute_fewest(a, min(need, total), executed, weights), (trial, need)
+            assert result.optimal and result.bound == result.objective
+            assert result.covered_weight >= min(need, total) - 1e-6 and not set(result.selected) & set(executed)
+            solved += result.solver == "highs"
+    assert solved > 0
+    assert partial_set_covers(np.eye(3, dtype=bool), []) == []
+    with pytest.raises(ConfigError, match="required"):
+        partial_set_covers(np.eye(3, dtype=bool), [1, -1])
+
+
+def test_one_model_for_many_targets_keeps_to_its_time():
+    rng = np.random.default_rng(5)
+    a = rng.random((60, 2000)) < 0.04
+    seen = int(a.any(axis=0).sum())
+    results = partial_set_covers(a, [int(f * seen) for f in (0.9, 0.95, 0.99)], time_limit=0.5)
+    for f, result in zip((0.9, 0.95, 0.99), results):
+        assert result.covered >= int(f * seen) and result.bound <= result.objective
+        assert result.optimal == (result.bound == result.objective)
+    assert [r.objective for r in results] == sorted(r.objective for r in results)

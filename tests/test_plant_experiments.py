@@ -9,6 +9,7 @@ from tpvp.errors import ConfigError, InputFileError
 from tpvp import parallel
 from tpvp.experiments import plants, runner
 from tpvp.experiments.comparison import compare_methods
+from tpvp.experiments.results import markdown, write_results
 
 CONFIG = make_config("plant", {"registration.embedded_deformation.iterations": 20})
 
@@ -58,13 +59,13 @@ def test_tables_hold_every_method_row(raw):
     assert set(out["table3_inflation"]["method"]) == {"ours", "ours-no-inflation"}
     assert set(out["table4_registration"]["method"]) == {"ours", "initial-view-only"}
     assert plants.NOT_APPLICABLE in set(out["table1_coverage_effort"]["status"].dropna())
-    assert "| ours |" in plants.markdown(out["table1_coverage_effort"])
+    assert "| ours |" in markdown(out["table1_coverage_effort"])
 
 
 def test_results_folder_holds_tables_figures_and_the_comparison(raw, tiny_cases, tmp_path):
     table, _ = raw
     case = plants.comparison_case(tiny_cases)
-    plants.write_results(tmp_path / "out", table, CONFIG, comparison=case)
+    write_results(plants.PLANT_EXPERIMENTS, tmp_path / "out", table, CONFIG, comparison=case)
     out = tmp_path / "out"
     for name in ("raw_cases.csv", "table1_coverage_effort.md", "figures/coverage_effort_generated.png",
                  "figures/views_per_species_generated.png", "comparison/comparison.png", "comparison/comparison.rrd"):

@@ -15,6 +15,7 @@ import pytest
 from tpvp.cli import main
 from tpvp.errors import ConfigError, InputFileError, PointCloudError
 from tpvp.experiments import greenhouse, rows
+from tpvp.experiments.results import write_results
 from tpvp.config import make_config
 from tpvp.scene.boxes import ROOMS, candidate_look_ats, room_config
 from tpvp.sensor.sensor import ROW_RANGE
@@ -217,7 +218,7 @@ def test_row_experiments_cache_and_tables(tmp_path):
     assert len(raw[raw["method"] == "prior-obb-random"]) == 2 and len(raw[raw["method"] == "upper-limit"]) == 3
     again = rows.run_row_experiments([case], methods, config, cache_dir=tmp_path / "cache", progress=False)
     pd.testing.assert_frame_equal(raw, again)  # read back from the cache, identical
-    written = rows.write_results(tmp_path / "out", raw, config)
+    written = write_results(rows.ROW_EXPERIMENTS, tmp_path / "out", raw, config)
     table6 = written["table6_coverage_effort"]
     coarse = table6[table6["method"] == "coarse"].iloc[0]
     assert coarse["views_mean"] == 15 and coarse["paper_coverage"] == pytest.approx(44.48)

@@ -8,6 +8,7 @@ from tpvp.cli_common import case_options, resolved_config
 from tpvp.commands.rows import row_config, row_options
 from tpvp.experiments import plants as plant_experiments
 from tpvp.experiments import rows as row_experiments
+from tpvp.experiments.results import markdown, write_results
 from tpvp.scene.boxes import ROOMS
 
 
@@ -21,8 +22,8 @@ def _experiments_plants(args) -> int:
     raw = plant_experiments.run_experiments(cases, methods, config, cache_dir=args.cache, workers=args.workers,
                                             scheduler=args.scheduler)
     comparison = plant_experiments.comparison_case(cases) if args.comparison else None
-    written = plant_experiments.write_results(args.output, raw, config, comparison=comparison)
-    print(plant_experiments.markdown(written["table1_coverage_effort"]))
+    written = write_results(plant_experiments.PLANT_EXPERIMENTS, args.output, raw, config, comparison=comparison)
+    print(markdown(written["table1_coverage_effort"]))
     print(f"wrote {Path(args.output).absolute()}/ (raw_cases.csv, {', '.join(f'{n}.csv/.md' for n in written)}, "
           f"paper_values.csv, figures/{', comparison/' if comparison else ''})")
     return 0
@@ -37,9 +38,9 @@ def _experiments_rows(args) -> int:
     print(f"{len(cases)} cases x {len(methods)} methods on {where}; cache {args.cache}")
     raw = row_experiments.run_row_experiments(cases, methods, config, cache_dir=args.cache, workers=args.workers,
                                               scheduler=args.scheduler)
-    written = row_experiments.write_results(args.output, raw, config)
+    written = write_results(row_experiments.ROW_EXPERIMENTS, args.output, raw, config)
 
-    print(plant_experiments.markdown(written["table6_coverage_effort"]))
+    print(markdown(written["table6_coverage_effort"]))
     print(f"wrote {Path(args.output).absolute()}/ (raw_cases.csv, {', '.join(f'{n}.csv/.md' for n in written)}, "
           f"paper_values.csv, figures/)")
     return 0

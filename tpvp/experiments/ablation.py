@@ -19,7 +19,8 @@ import pandas as pd
 from scipy import sparse
 
 from tpvp.config import with_overrides
-from tpvp.experiments.plants import mean_std, default_cases, method_config
+from tpvp.experiments.plants import default_cases, method_config
+from tpvp.experiments.results import mean_std
 from tpvp.experiments.single_plant import known, run_case, transfer
 from tpvp.pipeline.plant import planning_visibility
 from tpvp.inflation.inflate import SURFACE_LAYERS as ORIGINS

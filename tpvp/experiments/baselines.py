@@ -59,7 +59,7 @@ from tpvp.experiments.single_plant import observation
 from tpvp.path.local import local_path_lengths, obstacle_radius
 from tpvp.path.tsp import shortest_open_path
 from tpvp.setcover.ilp import solve_set_cover
-from tpvp.setcover.partial import partial_set_cover
+from tpvp.setcover.partial import partial_set_cover, partial_set_covers
 
 NBV_COLUMNS = ("views", "view", "coverage", "path_length", "seconds", "step_length", "radius", "tied")
 OPTIMUM_COLUMNS = ("target", "views", "coverage", "path_length", "optimal", "bound", "gap", "seconds",
@@ -187,7 +187,7 @@ def nbv_curve(scene, config: PlantConfig = PlantConfig(), max_views: int = 20) -
     return pd.DataFrame(rows, columns=list(NBV_COLUMNS))
 
 
-def optimum(scene, config: PlantConfig = PlantConfig(), targets=(1.0, 0.98)) -> pd.DataFrame:
+def optimum(scene, config: PlantConfig = PlantConfig(), targets=(1.0, 0.98), shared: bool = False) -> pd.DataFrame:
     """The exact optimum with perfect knowledge of the current plant, one row per target.
 
     Columns: ``target``, ``views`` (initial view included), ``coverage`` (oracle-normalised),
@@ -197,7 +197,10 @@ def optimum(scene, config: PlantConfig = PlantConfig(), targets=(1.0, 0.98)) -> 
     sorted, initial view excluded, as a string), ``order`` (the executed order, initial view first,
     as a string), ``selection_optimal``, ``path_optimal`` and ``status`` (solver words).
     Solver settings: ``config.selection.set_cover`` (solver, time limit, threads) for both ILPs and
-    ``config.path`` for the path.
+    ``config.path`` for the path. ``shared``: every target in one model
+    (:func:`tpvp.setcover.partial.partial_set_covers`: HiGHS, each target warm-started from the
+    next larger one's views, the time limit for all targets together), as a frontier of many
+    targets needs; else each target alone with the configured solver, as Table I is.
     """
     config, space, centre, initial = _plant_case(scene, config)
     targets = _check_targets(targets)
@@ -210,10 +213,19 @@ def optimum(scene, config: PlantConfig = PlantConfig(), targets=(1.0, 0.98)) -> 
     initial_covered = np.zeros(oracle.size, dtype=bool)
     initial_covered[visibility[initial].indices] = True
 
+    if shared:
+        together = partial_set_covers(visibility, [math.ceil(t * oracle.size - 1e-9) for t in targets],
+                                      executed=[initial], config=solver_config)
     rows = []
-    for target in targets:
+    for i, target in enumerate(targets):
         t0 = time.perf_counter()
-        if target >= 1.0:
+        if shared:
+            result = together[i]
+            selected, selection_optimal = result.selected, bool(result.optimal)
+            bound = 1.0 + float(result.bound)
+            status = f"partial set cover, one model for all targets: {result.status}"
+            t0 -= result.solve_seconds
+        elif target >= 1.0:
             result = solve_set_cover(visibility, executed=[initial], config=solver_config)
             selected, selection_optimal = result.selected, bool(result.optimal)
             bound = 1.0 + float(result.bound)

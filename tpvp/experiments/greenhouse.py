@@ -19,7 +19,8 @@ import numpy as np
 
 from tpvp.config import RowConfig
 from tpvp.errors import PointCloudError, checked_cloud
-from tpvp.pipeline.row import RowCaseResult, RowKnown, RowTransfer, check_row, plan, plan_path, timed, transfer
+from tpvp.pipeline.row import RowCaseResult, RowKnown, RowTransfer, check_row, plan, plan_path, transfer
+from tpvp.pipeline.timing import timed
 from tpvp.scene import voxels
 from tpvp.scene.boxes import room_config
 from tpvp.scene.grid import build_grid

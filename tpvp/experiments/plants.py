@@ -26,6 +26,7 @@ from tpvp.errors import ConfigError, InputFileError
 from tpvp.experiments.baselines import nbv_curve, optimum
 from tpvp.experiments.comparison import write_comparison_files
 from tpvp.experiments import runner
+from tpvp.experiments.results import mean_std
 from tpvp.experiments.runner import Experiment, shared
 from tpvp.experiments.single_plant import added_coverage, build_scene, rank_of, run_case, transfer
 from tpvp.io import atomic_write_text, read_point_cloud
@@ -307,9 +308,6 @@ def case_scene(case: Case, case_config: PlantConfig, cache_dir=None):
     return _scene(replace(case, initial_view=0), replace(case_config, initial_view=0))
 
 
-PLANT_EXPERIMENTS = Experiment("plant experiments", PLANT_METHODS, case_scene,
-                               order=("view_space", "instance", "rotation_deg", "initial_view", "method"),
-                               reference=f"{__name__}:PLANT_EXPERIMENTS")
 
 
 def run_task(case: Case, method: str, config: PlantConfig, cache_dir=None) -> pd.DataFrame:
@@ -332,18 +330,6 @@ def cached_experiments(cases, methods, config: PlantConfig | None = None, cache_
 # --------------------------------------------------------------------------------------------------
 # tables
 # --------------------------------------------------------------------------------------------------
-
-
-def mean_std(frame: pd.DataFrame, by: list, columns=("views", "coverage", "path_length_m")) -> pd.DataFrame:
-    frame = frame.copy()
-    frame["coverage"] = 100 * frame["coverage"]
-    grouped = frame.groupby(by, sort=False, dropna=False)
-    out = grouped.size().rename("cases").to_frame()
-    for column in columns:
-        if column in frame:
-            out[f"{column}_mean"] = grouped[column].mean()
-            out[f"{column}_std"] = grouped[column].std(ddof=0)
-    return out.reset_index()
 
 
 def paper_values() -> pd.DataFrame:
@@ -401,26 +387,6 @@ def optimum_ratio(done: pd.DataFrame) -> pd.DataFrame:
     return mean_std(rows, ["source", "view_space", "method"], columns=columns)
 
 
-def markdown(table: pd.DataFrame) -> str:
-    """A Markdown table with mean ± std columns merged (in the mean column's place)."""
-    if table.empty:
-        return "(no rows: the methods this table needs were not run)\n"
-    table = table.copy()
-    for column in [c for c in table.columns if c.endswith("_mean")]:
-        base = column[: -len("_mean")]
-        std = table.get(f"{base}_std")
-        merged = [f"{m:.2f} ± {s:.2f}" if pd.notna(m) else "" for m, s in
-                  zip(table[column], std if std is not None else [np.nan] * len(table))]
-        table.insert(table.columns.get_loc(column), f"{base} ", merged)  # a placeholder name while both exist
-        table = table.drop(columns=[column] + ([f"{base}_std"] if std is not None else []))
-        table = table.rename(columns={f"{base} ": base})
-    header = "| " + " | ".join(map(str, table.columns)) + " |"
-    rule = "|" + "|".join("---" for _ in table.columns) + "|"
-    body = ["| " + " | ".join("" if (isinstance(v, float) and np.isnan(v)) else str(v) for v in row) + " |"
-            for row in table.itertuples(index=False)]
-    return "\n".join([header, rule, *body]) + "\n"
-
-
 def comparison_case(cases) -> Case:
     """The case of the comparison figure: the paper shows a sphere case; the first one listed (else
     the first case)."""
@@ -428,34 +394,26 @@ def comparison_case(cases) -> Case:
     return next((c for c in cases if c.view_space == "sphere"), cases[0])
 
 
-def write_results(folder, raw: pd.DataFrame, config: PlantConfig | None = None, comparison: Case | None = None) -> dict:
-    """The raw per-case table, every aggregated table (CSV + Markdown), the paper's values, the
-    coverage-effort and per-species figures and, for a ``comparison`` case, the GMC / Ours /
-    optimum comparison (figure, table, rerun recording), as one published folder (whole or not at
-    all)."""
-    config = config or make_config("plant")
-    written = {}
-    with staged_folder(folder) as stage:
-        atomic_write_text(stage.folder / "raw_cases.csv", raw.to_csv(index=False))
-        atomic_write_text(stage.folder / "paper_values.csv", paper_values().to_csv(index=False))
-        for name, table in tables(raw).items():
-            atomic_write_text(stage.folder / f"{name}.csv", table.to_csv(index=False))
-            atomic_write_text(stage.folder / f"{name}.md", markdown(table))
-            written[name] = table
-        for source in raw["source"].unique():
-            rows = raw[raw["source"] == source]
-            plot_coverage_effort(stage.folder / "figures" / f"coverage_effort_{source}.png", rows,
-                                 f"Coverage-effort trade-off ({source} pairs)")
-        ours = written["table2_plant_complexity"]
-        for source in ours["source"].unique() if len(ours) else ():
-            plot_species_bars(stage.folder / "figures" / f"views_per_species_{source}.png",
-                              ours[ours["source"] == source], "views", f"Ours: views per species ({source} pairs)")
-        if comparison is not None:
-            case_config = comparison.config(config)
-            scene = case_scene(comparison, case_config)
-            write_comparison_files(stage.folder / "comparison", scene, case_config,
-                                   title=f"{comparison.view_space}, {comparison.instance.name}, rotation "
-                                         f"{comparison.rotation_deg:g} deg, initial view {comparison.initial_view}")
-        atomic_write_text(stage.folder / "config.yaml", config_yaml(config, "base configuration of the experiments"))
-        atomic_write_text(stage.folder / "provenance.json", json.dumps(provenance(config), indent=2) + "\n")
-    return written
+def _figures(folder, raw: pd.DataFrame, written: dict, config: PlantConfig, comparison: Case | None = None) -> None:
+    """The coverage-effort and per-species figures and, for a ``comparison`` case, the GMC / Ours /
+    optimum comparison (figure, table, rerun recording)."""
+    for source in raw["source"].unique():
+        rows = raw[raw["source"] == source]
+        plot_coverage_effort(folder / "figures" / f"coverage_effort_{source}.png", rows,
+                             f"Coverage-effort trade-off ({source} pairs)")
+    ours = written["table2_plant_complexity"]
+    for source in ours["source"].unique() if len(ours) else ():
+        plot_species_bars(folder / "figures" / f"views_per_species_{source}.png",
+                          ours[ours["source"] == source], "views", f"Ours: views per species ({source} pairs)")
+    if comparison is not None:
+        case_config = comparison.config(config)
+        scene = case_scene(comparison, case_config)
+        write_comparison_files(folder / "comparison", scene, case_config,
+                               title=f"{comparison.view_space}, {comparison.instance.name}, rotation "
+                                     f"{comparison.rotation_deg:g} deg, initial view {comparison.initial_view}")
+
+
+PLANT_EXPERIMENTS = Experiment("plant experiments", PLANT_METHODS, case_scene,
+                               order=("view_space", "instance", "rotation_deg", "initial_view", "method"),
+                               tables=tables, paper={"paper_values": paper_values}, figures=_figures,
+                               reference=f"{__name__}:PLANT_EXPERIMENTS")

@@ -25,7 +25,7 @@ from tpvp.errors import InputFileError
 from tpvp.experiments import runner
 from tpvp.experiments.greenhouse import (build_row_scene, candidate_truth, random_selection, row_candidates,
                                          row_coverage, row_transfer, run_row_case, upper_limit)
-from tpvp.experiments.plants import mean_std, markdown
+from tpvp.experiments.results import mean_std
 from tpvp.experiments.pose_noise import passive_map, pose_noise_study, summarise
 from tpvp.experiments.runner import Experiment, shared
 from tpvp.io import atomic_write_text, read_point_cloud
@@ -267,9 +267,6 @@ def scene_columns(scene) -> dict:
             "oracle_cached": scene.oracle_cached}
 
 
-# The case's oracle is cached beside the rows (cache_dir/oracle) or in the default cache folder.
-ROW_EXPERIMENTS = Experiment("row experiments", ROW_METHODS, _scene, order=("room", "previous_session", "method"),
-                             scene_columns=scene_columns, reference=f"{__name__}:ROW_EXPERIMENTS")
 
 
 def run_row_experiments(cases, methods=ALL_METHODS, config: RowConfig | None = None, cache_dir=None, workers: int = 1,
@@ -354,24 +351,16 @@ def tables(raw: pd.DataFrame) -> dict:
     return out
 
 
-def write_results(folder, raw: pd.DataFrame, config: RowConfig | None = None) -> dict:
-    """The raw table, Tables V-VI and timing (CSV + Markdown), the paper's values and the
-    coverage-path frontier figure, as one published folder (whole or not at all); ``config.yaml``
-    holds the configuration, what the experiments swept included."""
-    config = config or make_config("row")
-    written = {}
-    with staged_folder(folder) as stage:
-        atomic_write_text(stage.folder / "raw_cases.csv", raw.to_csv(index=False))
-        atomic_write_text(stage.folder / "paper_values.csv", paper_values().to_csv(index=False))
-        atomic_write_text(stage.folder / "paper_pose_noise.csv", paper_pose_noise().to_csv(index=False))
-        for name, table in tables(raw).items():
-            atomic_write_text(stage.folder / f"{name}.csv", table.to_csv(index=False))
-            atomic_write_text(stage.folder / f"{name}.md", markdown(table))
-            written[name] = table
-        plot_row_frontier(stage.folder / "figures" / "coverage_path_frontier.png", written["table6_coverage_effort"])
-        if "blockwise_prefix_curve" in written:
-            plot_blockwise_prefix(stage.folder / "figures" / "blockwise_prefix_curve.png",
-                                  written["blockwise_prefix_curve"], written["table6_coverage_effort"], paper_values())
-        atomic_write_text(stage.folder / "config.yaml", config_yaml(config, "base configuration of the row experiments"))
-        atomic_write_text(stage.folder / "provenance.json", json.dumps(provenance(config), indent=2) + "\n")
-    return written
+def _figures(folder, raw: pd.DataFrame, written: dict, config: RowConfig) -> None:
+    """The coverage-path frontier and, with Block-wise NBV's rows, its prefix curve."""
+    plot_row_frontier(folder / "figures" / "coverage_path_frontier.png", written["table6_coverage_effort"])
+    if "blockwise_prefix_curve" in written:
+        plot_blockwise_prefix(folder / "figures" / "blockwise_prefix_curve.png",
+                              written["blockwise_prefix_curve"], written["table6_coverage_effort"], paper_values())
+
+
+# The case's oracle is cached beside the rows (cache_dir/oracle) or in the default cache folder.
+ROW_EXPERIMENTS = Experiment("row experiments", ROW_METHODS, _scene, order=("room", "previous_session", "method"),
+                             scene_columns=scene_columns, tables=tables,
+                             paper={"paper_values": paper_values, "paper_pose_noise": paper_pose_noise},
+                             figures=_figures, reference=f"{__name__}:ROW_EXPERIMENTS")

@@ -5,7 +5,8 @@ A *case* (a plant pair, a row pair) holds several methods; all methods of a case
 process so they share its scene (ground truth, oracle) and, through :func:`shared`, the work
 several methods need (warm-up and registration, candidates). What differs between the plant and
 the row experiments is one :class:`Experiment`: its methods, how a case builds its scene, the
-columns every row gets from the scene and the order of the raw table.
+columns every row gets from the scene, the order of the raw table, and its tables, the paper's
+values and its figures (written by :func:`tpvp.experiments.results.write_results`).
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ import importlib
 import json
 import os
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Callable
 
@@ -44,13 +45,19 @@ def experiment_cache() -> Path:
 class Experiment:
     """One family of experiments. ``scene(case, case_config, cache_dir)``: the case's scene (a
     module-level function, memoised by the caller); ``scene_columns(scene)``: columns added to
-    every row; ``order``: the raw table's sort columns (``method`` sorts in the order asked)."""
+    every row; ``order``: the raw table's sort columns (``method`` sorts in the order asked).
+    What its results folder holds (:func:`tpvp.experiments.results.write_results`): ``tables(raw)``
+    (name -> aggregated table), ``paper`` (file name -> the paper's values) and
+    ``figures(folder, raw, tables, config, **options)``."""
 
     name: str
     methods: Registry
     scene: Callable
     order: tuple
     scene_columns: Callable | None = None
+    tables: Callable = dict
+    paper: dict = field(default_factory=dict)
+    figures: Callable | None = None
     reference: str = ""  # "module:attribute" where it is defined: worker processes import it from there
 
     def __reduce__(self):

@@ -12,7 +12,6 @@ session (:mod:`tpvp.session.plant`) captures them.
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -22,12 +21,16 @@ from tpvp.inflation import inflate
 from tpvp.inflation.weights import surface_area, surface_classes, surface_weights
 from tpvp.path.local import predicted_size
 from tpvp.path.route import path_through
+from tpvp.pipeline.timing import timed
 from tpvp.registration.methods import register
 from tpvp.scene import voxels
 from tpvp.scene.grid import build_grid
 from tpvp.setcover.methods import SelectionProblem, select_views
 from tpvp.visibility import visibility_matrix
 
+
+#: The stages whose times make ``timings["planning"]`` (after the transfer).
+PLANNING_STAGES = ("inflation", "visibility", "selection", "path")
 
 @dataclass(frozen=True, eq=False)
 class Known:
@@ -131,12 +134,10 @@ def transfer(known: Known, config: PlantConfig, nbv, progress=None) -> Transfer:
     method holding the executed views (the initial view and the warm-up NBVs) and their
     observations, from the simulator or from a real session's captures."""
     say = progress or (lambda stage: None)
-    coarse = np.concatenate(nbv.observations)
-    t = time.perf_counter()
-    say("registration")
-    alignment = register(known.previous, coarse, config.registration, name=known.names[0])
-    return Transfer(nbv, list(nbv.executed), coarse, alignment, {"registration": time.perf_counter() - t},
-                    _registration_warnings(known, alignment, config))
+    coarse, timings = np.concatenate(nbv.observations), {}
+    with timed(timings, "registration", say, "registration"):
+        alignment = register(known.previous, coarse, config.registration, name=known.names[0])
+    return Transfer(nbv, list(nbv.executed), coarse, alignment, timings, _registration_warnings(known, alignment, config))
 
 
 @dataclass(frozen=True, eq=False)
@@ -158,21 +159,17 @@ def planning_surface(known: Known, config: PlantConfig, transferred: Transfer, p
     say = progress or (lambda stage: None)
     timings = {}
     centre = np.zeros(3)
-    t = time.perf_counter()
-    say("inflation")
     coarse, warped = transferred.coarse, transferred.alignment.warped
-    inflated = inflate(warped, coarse, centre, predicted_size(coarse, centre), config.inflation)
-    timings["inflation"] = time.perf_counter() - t
-
-    t = time.perf_counter()
-    say("visibility")
-    resolution = config.selection.cover_resolution
-    grid, visibility = planning_visibility(known, inflated.planning, resolution)
-    classes = area = None  # only a weighted coverage target reads them
-    if config.surface_weights.enabled:
-        classes = surface_classes(grid.keys, resolution, warped, coarse, config.surface_weights.near_voxels * resolution)
-        area = surface_area(grid.keys, resolution, inflated.planning) if config.surface_weights.area else None
-    timings["visibility"] = time.perf_counter() - t
+    with timed(timings, "inflation", say, "inflation"):
+        inflated = inflate(warped, coarse, centre, predicted_size(coarse, centre), config.inflation)
+    with timed(timings, "visibility", say, "visibility"):
+        resolution = config.selection.cover_resolution
+        grid, visibility = planning_visibility(known, inflated.planning, resolution)
+        classes = area = None  # only a weighted coverage target reads them
+        if config.surface_weights.enabled:
+            classes = surface_classes(grid.keys, resolution, warped, coarse,
+                                      config.surface_weights.near_voxels * resolution)
+            area = surface_area(grid.keys, resolution, inflated.planning) if config.surface_weights.area else None
     return PlanningSurface(inflated, grid, visibility, classes, area, timings)
 
 
@@ -213,17 +210,12 @@ def plan(known: Known, config: PlantConfig, transferred: Transfer, progress=None
     surface = surface or planning_surface(known, config, transferred, progress)
     timings.update(surface.timings)
 
-    t = time.perf_counter()
-    say("view selection")
-    problem = selection_problem(known, config, transferred, surface)
-    selection = select_views(problem, config.selection)
-    timings["selection"] = time.perf_counter() - t
-
-    t = time.perf_counter()
-    say("path")
-    planned, path_length, tsp, radius = path_through(space, executed, selection.selected, coarse, config)
-    timings["path"] = time.perf_counter() - t
-    timings["planning"] = sum(timings[k] for k in ("inflation", "visibility", "selection", "path"))
+    with timed(timings, "selection", say, "view selection"):
+        problem = selection_problem(known, config, transferred, surface)
+        selection = select_views(problem, config.selection)
+    with timed(timings, "path", say, "path"):
+        planned, path_length, tsp, radius = path_through(space, executed, selection.selected, coarse, config)
+    timings["planning"] = sum(timings[k] for k in PLANNING_STAGES)
 
     return CaseResult(
         executed_views=executed, planned_views=planned,

@@ -12,8 +12,6 @@ session (:mod:`tpvp.session.row`) captures them.
 
 from __future__ import annotations
 
-import time
-from contextlib import contextmanager
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -22,6 +20,7 @@ from tpvp.config import RowConfig
 from tpvp.errors import PointCloudError
 from tpvp.inflation import inflate_voxels
 from tpvp.path.route import ROW_ROUTES
+from tpvp.pipeline.timing import timed
 from tpvp.path.tsp import TspConfig
 from tpvp.registration.methods import register
 from tpvp.scene import voxels
@@ -88,18 +87,15 @@ def transfer(known: RowKnown, config: RowConfig = RowConfig(), progress=None) ->
     """Registration of the previous session onto the coarse reconstruction, then voxel inflation
     (region of interest: the cube around the plant box, docs/greenhouse.md#inflation)."""
     say = progress or (lambda stage: None)
-    coarse = known.coarse
-    t = time.perf_counter()
-    say("registration")
-    alignment = register(known.previous, coarse, config.registration, name=known.names[0])
-    registration = time.perf_counter() - t
-    t = time.perf_counter()
-    say("inflation")
-    box = known.room.plant_box
-    inflation = inflate_voxels(alignment.warped, coarse, config.inflation.step, config.inflation.gamma_near,
-                               config.inflation.gamma_far, roi_centre=box.center, roi_half=1.5 * box.half_extent.max())
-    return RowTransfer(coarse, alignment, inflation, {"registration": registration,
-                                                       "inflation": time.perf_counter() - t})
+    coarse, timings = known.coarse, {}
+    with timed(timings, "registration", say, "registration"):
+        alignment = register(known.previous, coarse, config.registration, name=known.names[0])
+    with timed(timings, "inflation", say, "inflation"):
+        box = known.room.plant_box
+        inflation = inflate_voxels(alignment.warped, coarse, config.inflation.step, config.inflation.gamma_near,
+                                   config.inflation.gamma_far, roi_centre=box.center,
+                                   roi_half=1.5 * box.half_extent.max())
+    return RowTransfer(coarse, alignment, inflation, timings)
 
 
 def plan_path(room, positions, config: TspConfig = TspConfig(), with_passive: bool = True, route: str = "band"):
@@ -157,15 +153,6 @@ def planning_visibility(room, candidates: CandidateViews, planning_points, resol
                       look_at_fixed=False)
     matrix = safe_visibility(planning_grid, positions, look_ats, sensor)
     return PlanningVisibility(planning_grid, space, matrix, len(room.initial_positions), resolution)
-
-
-@contextmanager
-def timed(timings: dict, key: str, say, stage: str):
-    """Reports ``stage`` to ``say`` (a progress callback) and times the block into ``timings[key]``."""
-    say(stage)
-    t = time.perf_counter()
-    yield
-    timings[key] = time.perf_counter() - t
 
 
 @dataclass(frozen=True, eq=False)
