@@ -95,7 +95,7 @@ def _calibrate_case(case, targets, overrides) -> list[dict]:
     from tpvp.experiments.single_plant import build_scene, known, transfer
     from tpvp.pipeline.plant import planning_surface, selection_problem
     from tpvp.inflation.weights import surface_area, surface_classes
-    from tpvp.jit import compile_kernels
+    from tpvp.pipeline.jit import compile_kernels
     from tpvp.setcover.methods import select_views
     from tpvp.visibility import coverage_ratio, covered_voxels
 
@@ -133,7 +133,7 @@ def _calibrate_case(case, targets, overrides) -> list[dict]:
 def _evaluate_case(case, targets, overrides) -> list[dict]:
     from tpvp.experiments.frontier import coverage_frontier
     from tpvp.experiments.single_plant import build_scene, transfer
-    from tpvp.jit import compile_kernels
+    from tpvp.pipeline.jit import compile_kernels
     from tpvp.metrics import chamfer_distance
 
     compile_kernels()

@@ -1,7 +1,7 @@
 """The import graph of tpvp/, read from the code (no import is executed): cycles between modules,
-upward imports (a stage package importing ``learning`` or ``experiments``, ``learning`` importing
-``experiments``), imports of tpvp modules inside functions, and private names (``_x``) imported
-from another package (by tpvp/ and benchmarks/).
+upward imports (a foundation importing a stage, a stage package importing ``learning`` or
+``experiments``, ``learning`` importing ``experiments``), imports of tpvp modules inside
+functions, and private names (``_x``) imported from another package (by tpvp/ and benchmarks/).
 
 ``python benchmarks/import_graph.py`` prints the tables and a summary line; ``tests/test_layers.py``
 holds the layering rules (docs/architecture.md) to :func:`analyse`.
@@ -61,12 +61,18 @@ def layer(module: str) -> str:
     return parts[1] if len(parts) > 1 else ""
 
 
+#: The foundations: they may import each other and third-party libraries, never a stage.
+FOUNDATIONS = ("errors", "registry", "provenance", "parallel", "solvers", "numba_tools", "io", "")
+
+
 def upward(source: str, target: str) -> bool:
     if target.startswith("data_tools"):
         return not source.startswith("data_tools")  # the library never loads the data tools
     if source.startswith("data_tools"):  # the layers that plan or run experiments are not theirs
         return layer(target) in ("config", "pipeline", "learning", "experiments", "session", "cli", "cli_common", "commands")
     src, dst = layer(source), layer(target)
+    if src in FOUNDATIONS:
+        return dst not in FOUNDATIONS
     if src in TOP:
         return False
     if src == "learning":

@@ -36,7 +36,7 @@ import torch
 from tpvp.config import make_config
 from tpvp.experiments import plants
 from tpvp.experiments.single_plant import build_scene, observation
-from tpvp.jit import compile_kernels
+from tpvp.pipeline.jit import compile_kernels
 from tpvp.learning.planners import PcNbv, ma_scvp_selection
 from tpvp.nbv.methods import GeometricNbv, NbvContext
 from tpvp.setcover.methods import SelectionProblem

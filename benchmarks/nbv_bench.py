@@ -18,7 +18,7 @@ view, choose the NBV, observe it (the ground-truth visibility), integrate it, an
 
 A step's seconds cover the map update and the gains of every candidate view (what ``nbv_curve``
 times). The choices and gains of both must be identical (checked, not only timed). Kernels are
-compiled before timing (``tpvp.jit.compile_kernels`` plus a warm-up of the reference walk).
+compiled before timing (``tpvp.pipeline.jit.compile_kernels`` plus a warm-up of the reference walk).
 """
 
 from __future__ import annotations
@@ -43,7 +43,7 @@ import pandas as pd
 from tpvp.config import make_config
 from tpvp.experiments import plants
 from tpvp.experiments.single_plant import build_scene
-from tpvp.jit import compile_kernels
+from tpvp.pipeline.jit import compile_kernels
 from tpvp.nbv import OccupancyMap, information_gain
 from tpvp.nbv.information_gain import next_best_view
 from tpvp.nbv.methods import GeometricNbv, NbvChoice, NbvContext

@@ -49,7 +49,7 @@ import pandas as pd
 from tpvp.config import make_config
 from tpvp.experiments import plants
 from tpvp.experiments.single_plant import added_coverage, build_scene, rank_of
-from tpvp.jit import compile_kernels
+from tpvp.pipeline.jit import compile_kernels
 from tpvp.nbv.methods import NBV_METHODS, NbvContext, make_nbv
 
 

@@ -130,7 +130,7 @@ def bench_whole_plan(quick: bool = False) -> pd.DataFrame:
     from tpvp.config import make_config
     from tpvp.experiments import plants
     from tpvp.experiments.single_plant import build_scene, run_case
-    from tpvp.jit import compile_kernels
+    from tpvp.pipeline.jit import compile_kernels
 
     compile_kernels()
     instances = [plants.bundled_instance()] + plants.generated_instances(seeds=(0,) if quick else (0, 1, 2))

@@ -19,4 +19,4 @@ run experiments plants --quick --workers 2 --no-comparison --output "$out/plants
 run experiments rows --quick --workers 2 --output "$out/rows" --cache "$out/cache/rows"
 run greenhouse --quick --output "$out/greenhouse" --cache "$out/cache/oracles"
 echo "== notebooks (reader's mode)"
-/usr/bin/time -f "   %e s" "$python" -m tpvp.experiments.notebooks --output "$out/notebooks"
+/usr/bin/time -f "   %e s" "$python" -m tools.notebooks --output "$out/notebooks"

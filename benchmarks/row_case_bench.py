@@ -18,7 +18,7 @@ from dataclasses import replace
 from tpvp.config import make_config
 from tpvp.experiments import greenhouse
 from tpvp.experiments.rows import RowCase
-from tpvp.jit import compile_kernels
+from tpvp.pipeline.jit import compile_kernels
 
 GOALS = {"oracle": 120.0, "registration": 10.0, "visibility@3cm": 30.0, "path": 5.0, "case@4cm": 180.0}
 PAPER = {"oracle": "hours", "registration": "3-8", "visibility@10cm": "250", "visibility@5cm": "700",

@@ -34,7 +34,7 @@ from tpvp.experiments.greenhouse import build_row_scene, row_transfer
 from tpvp.pipeline.row import planning_visibility
 from tpvp.experiments.rows import RowCase
 from tpvp.io import atomic_write_text
-from tpvp.jit import compile_kernels
+from tpvp.pipeline.jit import compile_kernels
 from tpvp.metrics.views import forced_views, views_per_voxel
 from tpvp.scene import voxels
 from tpvp.setcover.methods import select_views

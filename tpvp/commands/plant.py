@@ -12,7 +12,7 @@ from tpvp.experiments.single_plant import build_scene, run_case, transfer
 from tpvp.io import read_point_cloud
 from tpvp.io.publish import staged_folder
 from tpvp.io.units import plant_size_warning
-from tpvp.jit import compile_kernels, plant_pieces
+from tpvp.pipeline.jit import compile_kernels, plant_pieces
 from tpvp.scene.normalise import check_session_pair
 from tpvp.scene.samples import load_sample
 from tpvp.viz.background import drawing_pool

@@ -21,6 +21,7 @@ from tpvp.inflation import inflate
 from tpvp.inflation.weights import surface_area, surface_classes, surface_weights
 from tpvp.path.local import predicted_size
 from tpvp.path.route import path_through
+from tpvp.pipeline.result import PlanResult
 from tpvp.pipeline.timing import timed
 from tpvp.registration.methods import register
 from tpvp.scene import voxels
@@ -64,21 +65,17 @@ class Known:
 
 
 @dataclass(frozen=True, eq=False)
-class CaseResult:
+class CaseResult(PlanResult):
+    """A plant's plan (:class:`PlanResult`; ``n_views`` counts the warm-up views, as the paper does)."""
+
     executed_views: list  # initial view and warm-up NBVs, in order
     planned_views: list  # selected views in execution order (after the last warm-up view)
-    coverage: float
     coverage_warm_up: float
-    n_views: int  # warm-up views included, as in the paper
-    path_length: float  # planning frame (m)
     chamfer_before: float  # transferred model vs coarse reconstruction (m, planning frame)
     chamfer_after: float
-    selection: object  # tpvp.setcover.methods.Selection
     tsp: object
-    timings: dict
     clouds: dict  # coarse, previous, warped, inflation, planning (for figures and recordings)
     obstacle: tuple  # (centre, radius) of the path's collision sphere
-    warnings: list = field(default_factory=list)  # plausibility warnings in the user's terms
     planning_target: float = 1.0  # fraction of the planning surface the selection had to see
 
     @property
@@ -104,13 +101,12 @@ class CaseResult:
                               set_cover_covered_weight=details.covered_weight,
                               set_cover_achievable_weight=details.achievable_weight)
         return {
-            "views": self.n_views, "coverage": self.coverage, "path_length_m": self.path_length,
+            **self.headline(),
             "warm_up_views": len(self.executed_views), "planned_views": len(self.planned_views),
             "planning_target": self.planning_target,
             "coverage_after_warm_up": self.coverage_warm_up,
             "chamfer_before_mm": 1e3 * self.chamfer_before, "chamfer_after_mm": 1e3 * self.chamfer_after,
-            "selection_optimal": bool(self.selection.optimal), "selection_status": self.selection.status,
-            **solver, "tsp_optimal": self.tsp.optimal, "tsp_method": self.tsp.method,
+            **self.selection_summary(), **solver, "tsp_optimal": self.tsp.optimal, "tsp_method": self.tsp.method,
             "warnings": " | ".join(self.warnings),
             **{f"seconds_{k}": v for k, v in self.timings.items()},
         }

@@ -20,6 +20,7 @@ from tpvp.config import RowConfig
 from tpvp.errors import PointCloudError
 from tpvp.inflation import inflate_voxels
 from tpvp.path.route import ROW_ROUTES
+from tpvp.pipeline.result import PlanResult
 from tpvp.pipeline.timing import timed
 from tpvp.path.tsp import TspConfig
 from tpvp.registration.methods import register
@@ -156,19 +157,15 @@ def planning_visibility(room, candidates: CandidateViews, planning_points, resol
 
 
 @dataclass(frozen=True, eq=False)
-class RowCaseResult:
+class RowCaseResult(PlanResult):
+    """A row's plan (:class:`PlanResult`; ``n_views`` and ``path_length`` include the passive sweep)."""
+
     candidates: CandidateViews
     selected: np.ndarray  # candidate indices in execution order
     path: object  # BandPathResult
-    coverage: float
     coverage_passive: float
-    n_views: int  # passive views included
-    path_length: float  # passive sweep included (m)
-    selection: object
     transfer: RowTransfer
     planning_voxels: int
-    timings: dict
-    warnings: list = field(default_factory=list)
 
     @property
     def positions(self) -> np.ndarray:
@@ -180,11 +177,11 @@ class RowCaseResult:
 
     def summary(self) -> dict:
         alignment = self.transfer.alignment
-        return {"views": self.n_views, "coverage": self.coverage, "path_length_m": self.path_length,
+        return {**self.headline(),
                 "passive_views": self.n_views - len(self.selected), "planned_views": len(self.selected),
                 "coverage_passive": self.coverage_passive, "planning_voxels": self.planning_voxels,
                 "chamfer_before_mm": 1e3 * alignment.chamfer_before, "chamfer_after_mm": 1e3 * alignment.chamfer_after,
-                "selection_optimal": bool(self.selection.optimal), "selection_status": self.selection.status,
+                **self.selection_summary(),
                 "path_gap": self.path.gap, "path_bound_m": self.path.bound, "warnings": " | ".join(self.warnings),
                 **{f"seconds_{k}": v for k, v in self.timings.items()}}
 
@@ -213,8 +210,9 @@ def plan(known: RowKnown, config: RowConfig = RowConfig(), transferred: RowTrans
         path, length = plan_path(known.room, candidates.positions[chosen], config.path, route=config.route)
         selected = chosen[path.order]
     timings["planning"] = sum(timings[k] for k in PLANNING_STAGES)
-    return RowCaseResult(candidates, selected, path, float("nan"), float("nan"),
-                         visibility.n_passive + len(selected), length, selection, transferred,
-                         visibility.planning_voxels, timings, path_warnings(path, config.path))
+    return RowCaseResult(candidates=candidates, selected=selected, path=path, coverage_passive=float("nan"),
+                         transfer=transferred, planning_voxels=visibility.planning_voxels,
+                         n_views=visibility.n_passive + len(selected), coverage=float("nan"), path_length=length,
+                         selection=selection, timings=timings, warnings=path_warnings(path, config.path))
 
 
