@@ -31,7 +31,7 @@ import pandas as pd
 
 from tpvp.config import make_config
 from tpvp.experiments.greenhouse import build_row_scene, row_transfer
-from tpvp.pipeline.row import planning_visibility
+from tpvp.pipeline.row import candidate_visibility
 from tpvp.experiments.rows import RowCase
 from tpvp.io import atomic_write_text
 from tpvp.pipeline.jit import compile_kernels
@@ -103,7 +103,7 @@ def measure_case(room: str, pair: int, reference: str, resolutions, cache=None) 
             for surface_name, points in surfaces.items():
                 if candidates_name != "ours" and surface_name != "planning surface":
                     continue
-                visibility = planning_visibility(scene.room, candidates, points, resolution, config.sensor)
+                visibility = candidate_visibility(scene.room, candidates, points, resolution, config.sensor)
                 occupied = len(voxels.voxelise(points, resolution))
                 targets = len(np.unique(candidates.target_ids)) if len(candidates.target_ids) else 0
                 rows.append({"room": room, "pair": pair, "reference": reference, "cover_cm": round(100 * resolution),

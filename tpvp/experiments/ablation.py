@@ -22,7 +22,7 @@ from tpvp.config import with_overrides
 from tpvp.experiments.plants import default_cases, method_config
 from tpvp.experiments.results import mean_std
 from tpvp.experiments.single_plant import known, run_case, transfer
-from tpvp.pipeline.plant import planning_visibility
+from tpvp.pipeline.surface import planning_visibility
 from tpvp.inflation.inflate import SURFACE_LAYERS as ORIGINS
 from tpvp.metrics.geometry import chamfer_distance, nearest_distances
 from tpvp.scene import voxels
@@ -138,10 +138,13 @@ def inflation_ablation(scene, config, transferred=None) -> InflationAblation:
     resolution = config.selection.cover_resolution
     clouds = with_inflation.clouds
     keys, origin = surface_origins((clouds["warped"], clouds["coarse"], clouds["inflation"]), resolution)
-    grid_with, visibility_with = planning_visibility(known(scene), clouds["planning"], resolution)
+    space, sensor = scene.view_space, known(scene).sensor
+    grid_with, visibility_with = planning_visibility(clouds["planning"], resolution, space.positions, space.look_ats,
+                                                     sensor)
     if not np.array_equal(grid_with.keys, keys):  # both are the code order of the same voxel set
         raise AssertionError("the planning grid and the labelled surface disagree")
-    _, visibility_without = planning_visibility(known(scene), without.clouds["planning"], resolution)
+    _, visibility_without = planning_visibility(without.clouds["planning"], resolution, space.positions,
+                                                space.look_ats, sensor)
     views_with, views_without = with_inflation.order, without.order
     return InflationAblation(
         with_inflation=with_inflation, without_inflation=without, resolution=resolution,

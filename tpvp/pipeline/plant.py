@@ -22,12 +22,10 @@ from tpvp.inflation.weights import surface_area, surface_classes, surface_weight
 from tpvp.path.local import predicted_size
 from tpvp.path.route import path_through
 from tpvp.pipeline.result import PlanResult
+from tpvp.pipeline.surface import planning_visibility
 from tpvp.pipeline.timing import timed
 from tpvp.registration.methods import register
-from tpvp.scene import voxels
-from tpvp.scene.grid import build_grid
 from tpvp.setcover.methods import SelectionProblem, select_views
-from tpvp.visibility import visibility_matrix
 
 
 #: The stages whose times make ``timings["planning"]`` (after the transfer).
@@ -160,7 +158,9 @@ def planning_surface(known: Known, config: PlantConfig, transferred: Transfer, p
         inflated = inflate(warped, coarse, centre, predicted_size(coarse, centre), config.inflation)
     with timed(timings, "visibility", say, "visibility"):
         resolution = config.selection.cover_resolution
-        grid, visibility = planning_visibility(known, inflated.planning, resolution)
+        space = known.view_space
+        grid, visibility = planning_visibility(inflated.planning, resolution, space.positions, space.look_ats,
+                                               known.sensor)
         classes = area = None  # only a weighted coverage target reads them
         if config.surface_weights.enabled:
             classes = surface_classes(grid.keys, resolution, warped, coarse,
@@ -180,14 +180,6 @@ def selection_problem(known: Known, config: PlantConfig, transferred: Transfer,
     return SelectionProblem(surface.visibility, tuple(transferred.executed), known.view_space,
                             surface.grid.centres, selection.planning_target(config.view_space),
                             voxel_weights=weights, nbv=transferred.nbv)
-
-
-def planning_visibility(known: Known, planning_cloud, resolution: float):
-    """The planning grid of ``planning_cloud`` voxelised at ``resolution`` and what each candidate
-    view sees of it (ray casting): ``(grid, (views x planning voxels) matrix)``."""
-    grid = build_grid(voxels.voxelise(planning_cloud, resolution), resolution)
-    space = known.view_space
-    return grid, visibility_matrix(grid, space.positions, space.look_ats, known.sensor)
 
 
 def plan(known: Known, config: PlantConfig, transferred: Transfer, progress=None,

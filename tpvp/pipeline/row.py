@@ -21,16 +21,14 @@ from tpvp.errors import PointCloudError
 from tpvp.inflation import inflate_voxels
 from tpvp.path.route import ROW_ROUTES
 from tpvp.pipeline.result import PlanResult
+from tpvp.pipeline.surface import planning_visibility
 from tpvp.pipeline.timing import timed
 from tpvp.path.tsp import TspConfig
 from tpvp.registration.methods import register
-from tpvp.scene import voxels
-from tpvp.scene.grid import build_grid
 from tpvp.setcover.methods import Selection, SelectionProblem, select_views
 from tpvp.viewspace import ViewSpace
 from tpvp.viewspace.lookat import CandidateViews
 from tpvp.viewspace.priors import PriorContext, candidate_views
-from tpvp.visibility import safe_visibility
 
 MIN_INSIDE_PLANT_BOX = 0.5  # a row whose points lie mostly outside its room's plant box is in another frame
 BOX_TOLERANCE = 0.10  # m: leaves may overhang the plant box a little
@@ -142,18 +140,16 @@ class PlanningVisibility:
         return np.asarray(selection.selected, dtype=np.int64) - self.n_passive
 
 
-def planning_visibility(room, candidates: CandidateViews, planning_points, resolution: float,
-                        sensor) -> PlanningVisibility:
-    """The planning surface (``planning_points``: the transferred, inflated previous session)
-    voxelised at ``resolution`` (the covering voxel), and what each passive view and each candidate
-    of ``room`` sees of it through ``sensor`` (ray casting; the dominant cost of planning)."""
-    planning_grid = build_grid(voxels.voxelise(planning_points, resolution), resolution)
+def candidate_visibility(room, candidates: CandidateViews, planning_points, resolution: float,
+                         sensor) -> PlanningVisibility:
+    """:func:`tpvp.pipeline.surface.planning_visibility` of the passive views of ``room``, then the
+    candidates."""
     positions = np.concatenate([room.initial_positions, candidates.positions])
     look_ats = np.concatenate([room.initial_look_ats, candidates.look_ats])
-    space = ViewSpace(f"{room.room} transfer candidates", positions, look_ats, max_range=sensor.max_range,
-                      look_at_fixed=False)
-    matrix = safe_visibility(planning_grid, positions, look_ats, sensor)
-    return PlanningVisibility(planning_grid, space, matrix, len(room.initial_positions), resolution)
+    space = ViewSpace(f"{room.room} {candidates.prior} candidates", positions, look_ats,
+                      max_range=sensor.max_range, look_at_fixed=False)
+    grid, matrix = planning_visibility(planning_points, resolution, positions, look_ats, sensor)
+    return PlanningVisibility(grid, space, matrix, len(room.initial_positions), resolution)
 
 
 @dataclass(frozen=True, eq=False)
@@ -200,7 +196,7 @@ def plan(known: RowKnown, config: RowConfig = RowConfig(), transferred: RowTrans
         context = known.prior_context(config.inflation.step, transferred)
         candidates = candidate_views(config.candidates, context, config.targets, config.seed)
     with timed(timings, "visibility", say, "visibility"):
-        visibility = planning_visibility(known.room, candidates, transferred.inflation.planning,
+        visibility = candidate_visibility(known.room, candidates, transferred.inflation.planning,
                                          config.selection.cover_resolution, config.sensor)
     with timed(timings, "selection", say, "view selection"):
         problem = visibility.problem(config.selection.planning_target(config.view_space))
