@@ -8,6 +8,7 @@ from tpvp.cli_common import case_options, resolved_config
 from tpvp.commands.rows import row_config, row_options
 from tpvp.experiments import plants as plant_experiments
 from tpvp.experiments import rows as row_experiments
+from tpvp.experiments import season
 from tpvp.experiments.results import markdown, write_results
 from tpvp.scene.boxes import ROOMS
 
@@ -43,6 +44,22 @@ def _experiments_rows(args) -> int:
     print(markdown(written["table6_coverage_effort"]))
     print(f"wrote {Path(args.output).absolute()}/ (raw_cases.csv, {', '.join(f'{n}.csv/.md' for n in written)}, "
           f"paper_values.csv, figures/)")
+    return 0
+
+
+def _experiments_season(args) -> int:
+    config = resolved_config(args)
+    target = args.coverage_target if args.coverage_target is not None else season.COVERAGE_TARGET
+    cases = season.season_cases(args.quick, tuple(args.species), tuple(args.seeds), args.sessions,
+                                tuple(args.view_spaces), target)
+    arms = args.arms or list(season.SEASON_ARMS.defaults())
+    print(f"{len(cases)} plant(s) x {len(arms)} arm(s), {cases[0].sessions} sessions each, coverage target {target:g}; "
+          f"cache {args.cache}")
+    raw = season.run_season_experiments(cases, arms, config, cache_dir=args.cache, workers=args.workers)
+    written = write_results(season.SEASON_EXPERIMENTS, args.output, raw, config)
+    print(markdown(written["season_totals"]))
+    print(f"wrote {Path(args.output).absolute()}/ (raw_cases.csv, {', '.join(f'{n}.csv/.md' for n in written)}, "
+          f"figures/season.png)")
     return 0
 
 
@@ -84,3 +101,20 @@ def experiments_arguments(experiments) -> None:
     rows.add_argument("--cache", default="outputs/cache/rows",
                       help="cache folder of per-task rows and the oracles (default: %(default)s)")
     rows.set_defaults(func=_experiments_rows)
+    seasons = which.add_parser("season", help="a season of generated plants: each session planned from the truth or "
+                                             "from the last session's own reconstruction (closed loop)")
+    case_options(seasons, "outputs/experiments/season", case_options=False)
+    seasons.add_argument("--species", nargs="+", default=list(season.SPECIES), choices=season.SPECIES,
+                         help="(default: %(default)s)")
+    seasons.add_argument("--seeds", nargs="+", type=int, default=[0], help="generated plants (default: %(default)s)")
+    seasons.add_argument("--sessions", type=int, default=season.SESSIONS,
+                         help="scans of each plant, two days apart (default: %(default)s)")
+    seasons.add_argument("--view-spaces", nargs="+", default=["hemisphere"], help="(default: %(default)s)")
+    seasons.add_argument("--arms", nargs="+", default=None,
+                         help=f"priors to plan from ({season.SEASON_ARMS.describe()})")
+    seasons.add_argument("--quick", action="store_true",
+                         help=f"one tomato, {season.QUICK['sessions']} sessions (about 10 s)")
+    seasons.add_argument("--workers", type=int, default=2, help="parallel processes (default: %(default)s)")
+    seasons.add_argument("--cache", default="outputs/cache/season",
+                         help="cache folder of per-(plant, arm) rows; an interrupted run resumes (default: %(default)s)")
+    seasons.set_defaults(func=_experiments_season)

@@ -620,12 +620,7 @@ def generate_session_pair(species: str, seed: int, days: float = 2.0, stage: flo
     ``params.new_leaf`` is False) and their internodes have no correspondence.
     """
     species, seed, stage, params, sp = _setup(species, seed, stage, params)
-    try:
-        days = float(days)
-    except (TypeError, ValueError):
-        raise ConfigError(f"days must be a number, got {days!r}") from None
-    if not np.isfinite(days) or days <= 0 or days > 7:
-        raise ConfigError(f"days between sessions must be in (0, 7], got {days!r}")
+    days = _check_days(days)
     age_prev = stage * sp.age1
     age_cur = age_prev + days * params.growth_rate * _CLOCK[species]
     if params.new_leaf:
@@ -671,6 +666,28 @@ def generate_session_pair(species: str, seed: int, days: float = 2.0, stage: flo
                        correspondence_previous_idx=np.concatenate(prev_idx).astype(np.int64),
                        correspondence_current_idx=np.concatenate(cur_idx).astype(np.int64),
                        days=days, new_organs=new_organs)
+
+
+def generate_growth_series(species: str, seed: int, sessions: int = 6, days: float = 2.0, stage: float = 1.0,
+                           params: PlantParams | None = None) -> list[PlantSample]:
+    """The plant of :func:`generate_plant` scanned ``sessions`` times, ``days`` apart, from ``stage``
+    on (the age steps of :func:`generate_session_pair`): a season of one plant, each scan sampled
+    on its own as a scanner's would be."""
+    species, seed, stage, params, sp = _setup(species, seed, stage, params)
+    if isinstance(sessions, bool) or not isinstance(sessions, (int, np.integer)) or sessions < 1:
+        raise ConfigError(f"sessions must be an integer >= 1, got {sessions!r}")
+    step = _check_days(days) * params.growth_rate * _CLOCK[species] / sp.age1
+    return [generate_plant(species, seed, stage + k * step, params) for k in range(int(sessions))]
+
+
+def _check_days(days) -> float:
+    try:
+        days = float(days)
+    except (TypeError, ValueError):
+        raise ConfigError(f"days must be a number, got {days!r}") from None
+    if not np.isfinite(days) or days <= 0 or days > 7:
+        raise ConfigError(f"days between sessions must be in (0, 7], got {days!r}")
+    return days
 
 
 def plant_summary(sample: PlantSample, largest_side: float = 0.24, voxel: float = 0.002) -> dict:

@@ -6,6 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+from matplotlib.ticker import MaxNLocator
+
 from tpvp.viz.figures import _equal_axes, _save, _subsample, plt
 
 _STYLE = {"ours": ("tab:red", "o"), "ours-no-inflation": ("tab:orange", "s"), "initial-view-only": ("tab:brown", "v"),
@@ -140,5 +142,29 @@ def plot_frontier(path, frontier: pd.DataFrame, title: str = ""):
     axes[0].legend(fontsize=8, loc="lower right")
     fig.suptitle(f"{title}: coverage-effort frontier (labels: planning target, %)" if title
                  else "Coverage-effort frontier (labels: planning target, %)")
+    fig.tight_layout()
+    return _save(fig, path, vector=True)
+
+
+#: What the season figure draws per session: (column of the per-session table, axis label).
+SEASON_PANELS = (("coverage", "true coverage (%)"), ("views", "views"), ("chamfer_fused_mm", "fused model to truth (mm)"),
+                 ("prior_missing", "today's plant the prior missed (share)"))
+
+
+def plot_season(path, per_session: pd.DataFrame, title: str = ""):
+    """A season session by session (``tpvp.experiments.season.tables``' per-session means): one line
+    per arm and view space in each panel (:data:`SEASON_PANELS`)."""
+    fig, axes = plt.subplots(1, len(SEASON_PANELS), figsize=(4 * len(SEASON_PANELS), 3.6))
+    styles = {"truth": ("tab:blue", "o-"), "own": ("tab:red", "s--")}
+    for ax, (column, label) in zip(axes, SEASON_PANELS):
+        for (space, arm), rows in per_session.groupby(["view_space", "arm"], sort=False):
+            colour, marker = styles.get(arm, ("tab:grey", "^:"))
+            ax.plot(rows["session"], rows[f"{column}_mean"], marker, color=colour, label=f"{arm} ({space})")
+        ax.set_xlabel("session")
+        ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+        ax.set_ylabel(label)
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=8)
+    fig.suptitle(title or "A season: each session planned from the truth or from its own last reconstruction")
     fig.tight_layout()
     return _save(fig, path, vector=True)

@@ -1,0 +1,98 @@
+"""A season of one plant (tpvp.experiments.season): the chained sessions against a loop written
+out by hand, and the growth series it runs on."""
+
+import numpy as np
+import pytest
+
+from tpvp.config import load_config
+from tpvp.errors import ConfigError
+from tpvp.experiments.season import SEASON_COLUMNS, prior_missing, run_season
+from tpvp.experiments.single_plant import build_scene, observation, run_case
+from tpvp.metrics import chamfer_distance
+from tpvp.scene.simulator import scan_points
+from tpvp.synthetic.plants import generate_growth_series, generate_plant
+
+CONFIG = load_config("paper", {"selection.coverage_target": 0.98})
+
+
+@pytest.fixture(scope="module")
+def series():
+    return [sample.points for sample in generate_growth_series("tomato", 0, sessions=3)]
+
+
+def test_a_growth_series_is_the_plant_growing(series):
+    assert len(series) == 3
+    extents = [np.ptp(points, axis=0).max() for points in series]
+    assert extents[0] < extents[1] < extents[2]  # it grows
+    first = generate_growth_series("tomato", 0, sessions=1)[0]
+    assert np.array_equal(first.points, generate_plant("tomato", 0).points)  # day 1 is the plant at stage 1
+    for bad in (0, 2.5, True):
+        with pytest.raises(ConfigError, match="sessions"):
+            generate_growth_series("tomato", 0, sessions=bad)
+    with pytest.raises(ConfigError, match="days"):
+        generate_growth_series("tomato", 0, days=0)
+
+
+def test_a_season_equals_its_sessions_chained_by_hand(series):
+    table = run_season(series, CONFIG, name="tomato 0")
+    assert tuple(table.columns) == SEASON_COLUMNS
+    assert table[["session", "arm"]].values.tolist() == [[2, "truth"], [2, "own"], [3, "truth"], [3, "own"]]
+    own = series[0]
+    for day in (1, 2):
+        for arm in ("truth", "own"):
+            prior = series[day - 1] if arm == "truth" else own
+            scene = build_scene(prior, series[day], CONFIG)
+            result = run_case(scene, CONFIG)
+            seen = np.unique(np.concatenate([observation(scene, view) for view in result.order]), axis=0)
+            row = table[(table["session"] == day + 1) & (table["arm"] == arm)].iloc[0]
+            assert (row["views"], row["coverage"], row["path_length_m"]) == \
+                (result.n_views, result.coverage, result.path_length), (day, arm)
+            assert row["prior_points"] == len(prior)
+            assert row["chamfer_fused_mm"] == pytest.approx(1e3 / scene.scan_scale * chamfer_distance(seen, scene.current))
+            if arm == "own":
+                next_own = scan_points(scene.plant_from_scan, seen)
+        own = next_own
+    assert (table["prior_missing"].between(0, 1)).all()
+    # session 2 starts both arms from day 1's full scan
+    first = table[table["session"] == 2]
+    assert first.iloc[0].drop("arm").equals(first.iloc[1].drop("arm"))
+
+
+def test_prior_missing_counts_the_plant_the_prior_holds_nothing_near():
+    scene = build_scene(generate_plant("tomato", 0).points, generate_plant("tomato", 0).points, CONFIG)
+    plant = scene.grid.centres[scene.grid.countable]
+    voxel = CONFIG.gt_resolution
+    assert prior_missing(scene, plant, voxel) == 0.0
+    half = plant[plant[:, 2] < np.median(plant[:, 2])]
+    missing = prior_missing(scene, half, voxel)
+    # brute force: a plant voxel is held when a prior point lies within one voxel in every axis
+    keys, held = np.floor(plant / voxel), np.floor(half / voxel)
+    expected = np.mean([not (np.abs(held - key) <= 1).all(axis=1).any() for key in keys])
+    assert missing == pytest.approx(expected) and 0.2 < missing < 0.8
+
+
+def test_a_season_needs_two_scans_and_known_arms(series):
+    with pytest.raises(ConfigError, match="at least 2 scans"):
+        run_season(series[:1], CONFIG)
+    with pytest.raises(ConfigError, match="unknown season arm 'oracle'"):
+        run_season(series, CONFIG, arms=("oracle",))
+
+
+def test_the_season_command_writes_its_tables_and_figure_and_resumes(tmp_path, capsys):
+    import pandas as pd
+
+    from tpvp.cli import main
+
+    argv = ["experiments", "season", "--quick", "--workers", "1", "--output", str(tmp_path / "out"),
+            "--cache", str(tmp_path / "cache")]
+    assert main(argv) == 0
+    out = capsys.readouterr().out
+    assert "1 plant(s) x 2 arm(s), 3 sessions each, coverage target 0.98" in out
+    totals = pd.read_csv(tmp_path / "out" / "season_totals.csv")
+    assert totals["arm"].tolist() == ["truth", "own"] and (totals["sessions"] == 2).all()
+    assert (tmp_path / "out" / "figures" / "season.png").stat().st_size > 0
+    cached = sorted((tmp_path / "cache").glob("*.parquet"))
+    assert len(cached) == 2  # one per (plant, arm): a second run reads them
+    assert main(argv[:-4] + ["--output", str(tmp_path / "again"), "--cache", str(tmp_path / "cache")]) == 0
+    assert pd.read_csv(tmp_path / "again" / "raw_cases.csv").drop(columns=["seconds_task"]).equals(
+        pd.read_csv(tmp_path / "out" / "raw_cases.csv").drop(columns=["seconds_task"]))
