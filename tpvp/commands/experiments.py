@@ -113,7 +113,7 @@ def experiments_arguments(experiments) -> None:
     seasons.add_argument("--arms", nargs="+", default=None,
                          help=f"priors to plan from ({season.SEASON_ARMS.describe()})")
     seasons.add_argument("--quick", action="store_true",
-                         help=f"one tomato, {season.QUICK['sessions']} sessions (about 10 s)")
+                         help=f"one tomato, {season.QUICK['sessions']} sessions (about 15 s)")
     seasons.add_argument("--workers", type=int, default=2, help="parallel processes (default: %(default)s)")
     seasons.add_argument("--cache", default="outputs/cache/season",
                          help="cache folder of per-(plant, arm) rows; an interrupted run resumes (default: %(default)s)")

@@ -1,9 +1,11 @@
 """A season, not a session: the sessions of one plant chained, each planned from a prior.
 
 Session 1 plans day 2 from day 1's full scan. From session 2 on, each arm plans day k from its own
-prior: ``truth``, the previous day's ground-truth scan (the paper's protocol), or ``own``, what
-the previous session reconstructed from its own executed views (the voxels they saw of that day's
-plant, as ``tpvp session export`` writes it): the closed loop a monitoring robot runs. Every
+prior: ``truth``, the previous day's ground-truth scan (the paper's protocol), ``own``, what the
+previous session reconstructed from its own executed views (the voxels they saw of that day's
+plant, as ``tpvp session export`` writes it): the closed loop a monitoring robot runs, or ``none``:
+no prior, the geometric NBV until its true coverage reaches the coverage target (a stopping rule
+on the ground truth: a lower bound for a robot without a prior). Every
 session is measured on today's ground truth: views, true coverage, path, the Chamfer distance of
 what the session reconstructed to today's plant, the registration residual, and the share of
 today's plant the registered prior held nothing near.
@@ -21,6 +23,7 @@ from tpvp.errors import ConfigError
 from tpvp.experiments import runner
 from tpvp.experiments.results import mean_std
 from tpvp.experiments.runner import Experiment
+from tpvp.experiments.baselines import nbv_curve
 from tpvp.experiments.single_plant import build_scene, run_case
 from tpvp.metrics import chamfer_distance
 from tpvp.registry import Registry
@@ -30,7 +33,9 @@ from tpvp.synthetic.plants import generate_growth_series
 from tpvp.visibility import covered_voxels
 from tpvp.viz.experiments import plot_season
 
-ARMS = ("truth", "own")
+ARMS = ("truth", "own", "none")
+#: The most views the ``none`` arm's sequential NBV may take to reach the coverage target.
+NONE_MAX_VIEWS = 40
 SEASON_ARMS = Registry("season arm")
 #: What ``tpvp experiments season`` runs: the coverage target, generated plants and their sessions.
 COVERAGE_TARGET = 0.98
@@ -61,6 +66,16 @@ def prior_missing(scene, warped: np.ndarray, voxel: float) -> float:
     return float(1.0 - found.mean())
 
 
+def _without_prior(scene, config: PlantConfig):
+    """The ``none`` arm: the geometric NBV from the initial view until its true coverage reaches the
+    coverage target (or :data:`NONE_MAX_VIEWS`); (views, coverage, path, executed views)."""
+    curve = nbv_curve(scene, with_overrides(config, {"nbv.method": "geometric"}), NONE_MAX_VIEWS)
+    reached = curve[curve["coverage"] >= config.selection.coverage_target - 1e-12]
+    last = reached.iloc[0] if len(reached) else curve.iloc[-1]
+    steps = int(last["views"])
+    return steps, float(last["coverage"]), float(last["path_length"]), curve["view"].iloc[:steps].astype(int).tolist()
+
+
 def run_season(series, config: PlantConfig = PlantConfig(), arms=ARMS, name: str = "plant") -> pd.DataFrame:
     """One row per session (2 .. n: the day planned) and arm. ``series``: the plant's scans in
     order (points, metres), day 1 first."""
@@ -74,18 +89,23 @@ def run_season(series, config: PlantConfig = PlantConfig(), arms=ARMS, name: str
     for day in range(1, len(series)):
         next_own = own
         for arm in arms:
-            prior = series[day - 1] if arm == "truth" else own
+            prior = series[day - 1] if arm in ("truth", "none") else own
             scene = build_scene(prior, series[day], config,
                                 names=(f"{name} day {day} ({arm} prior)", f"{name} day {day + 1}"))
-            result = run_case(scene, config)
-            fused = reconstruction(scene, result.order)
             per_mm = 1e3 / scene.scan_scale  # planning-frame metres -> the scans' millimetres
-            rows.append({"session": day + 1, "arm": arm, "views": result.n_views, "coverage": result.coverage,
-                         "path_length_m": result.path_length,
-                         "chamfer_fused_mm": per_mm * chamfer_distance(fused, scene.current),
-                         "registration_chamfer_mm": per_mm * result.chamfer_after,
-                         "prior_missing": prior_missing(scene, result.clouds["warped"], config.gt_resolution),
-                         "prior_points": len(prior)})
+            if arm == "none":
+                views, coverage, path_length, order = _without_prior(scene, config)
+                registration = missing = float("nan")
+            else:
+                result = run_case(scene, config)
+                views, coverage, path_length, order = result.n_views, result.coverage, result.path_length, result.order
+                registration = per_mm * result.chamfer_after
+                missing = prior_missing(scene, result.clouds["warped"], config.gt_resolution)
+            fused = reconstruction(scene, order)
+            rows.append({"session": day + 1, "arm": arm, "views": views, "coverage": coverage,
+                         "path_length_m": path_length, "chamfer_fused_mm": per_mm * chamfer_distance(fused, scene.current),
+                         "registration_chamfer_mm": registration, "prior_missing": missing,
+                         "prior_points": 0 if arm == "none" else len(prior)})
             if arm == "own":
                 next_own = scan_points(scene.plant_from_scan, fused)
         own = next_own
@@ -130,7 +150,8 @@ def _arm(name: str):
 
 
 for _name, _help in (("truth", "each session from the previous day's ground-truth scan (the paper's protocol)"),
-                     ("own", "each session from what the previous session's own views reconstructed (closed loop)")):
+                     ("own", "each session from what the previous session's own views reconstructed (closed loop)"),
+                     ("none", "no prior: the geometric NBV until it reaches the coverage target")):
     SEASON_ARMS.register(_name, _help, default=True)(_arm(_name))
 
 
