@@ -76,3 +76,15 @@ def test_every_drawing_the_outputs_name_exists():
     assert len(names) >= 5, names
     for name in names:
         assert callable(drawing(name)), name
+
+
+def test_a_drawing_process_killed_from_outside_is_one_line(tmp_path):
+    import os
+    import signal
+
+    with drawing_pool() as pool:
+        os.kill(pool._process.pid, signal.SIGKILL)
+        pool._process.join()
+        with pytest.raises(TpvpError, match="the drawing process ended"):
+            draw(_calls(tmp_path), pool)
+    assert multiprocessing.active_children() == []

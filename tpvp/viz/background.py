@@ -37,8 +37,12 @@ class DrawingPool:
         theirs.close()
 
     def draw(self, calls) -> list:
-        self._connection.send(list(calls))
-        ok, answer = self._connection.recv()
+        try:
+            self._connection.send(list(calls))
+            ok, answer = self._connection.recv()
+        except (EOFError, OSError):  # killed from outside (out of memory, a signal to it alone)
+            raise TpvpError(f"the drawing process ended (exit status {self._process.exitcode}) before "
+                            "the figures were drawn") from None
         if isinstance(answer, BaseException):
             raise answer
         if not ok:
