@@ -8,6 +8,7 @@ outputs clean up after (docs/cli.md: exit status). :func:`run_checked` is shared
 ``python -m data_tools``; the ``tpvp`` command is :func:`main`.
 """
 
+import _thread
 import importlib.util
 import os
 import signal
@@ -81,9 +82,10 @@ def _interrupt(received: list):
             signal.signal(signum, signal.SIG_DFL)
             os.kill(os.getpid(), signum)
             return
-        publish = sys.modules.get("tpvp.io.publish")  # not loaded: no step was published
-        if publish is not None and publish.step_published() is not None:
-            publish.note_late_signal(signum)
+        # Not loaded, or still loading (the signal came during its import): no step was published.
+        step_published = getattr(sys.modules.get("tpvp.io.publish"), "step_published", None)
+        if step_published is not None and step_published() is not None:
+            sys.modules["tpvp.io.publish"].note_late_signal(signum)
             return
         received.append(signum)
         raise KeyboardInterrupt
@@ -99,7 +101,9 @@ def _redeliver(received: list, previous_hook):
     def hook(unraisable):
         if received:
             if isinstance(unraisable.exc_value, KeyboardInterrupt):
-                signal.raise_signal(received[-1])  # handled again once back in Python code
+                # Handled again at the next Python code after this hook (signal.raise_signal would
+                # run the handler inside the hook, whose KeyboardInterrupt Python prints and drops).
+                _thread.interrupt_main(received[-1])
             return
         previous_hook(unraisable)
     return hook
