@@ -23,11 +23,8 @@ def _experiments_plants(args) -> int:
     raw = plant_experiments.run_experiments(cases, methods, config, cache_dir=args.cache, workers=args.workers,
                                             scheduler=args.scheduler)
     comparison = plant_experiments.comparison_case(cases) if args.comparison else None
-    written = write_results(plant_experiments.PLANT_EXPERIMENTS, args.output, raw, config, comparison=comparison)
-    print(markdown(written["table1_coverage_effort"]))
-    print(f"wrote {Path(args.output).absolute()}/ (raw_cases.csv, {', '.join(f'{n}.csv/.md' for n in written)}, "
-          f"paper_values.csv, figures/{', comparison/' if comparison else ''})")
-    return 0
+    return _publish(plant_experiments.PLANT_EXPERIMENTS, args.output, raw, config, "table1_coverage_effort",
+                    f"paper_values.csv, figures/{', comparison/' if comparison else ''}", comparison=comparison)
 
 
 def _experiments_rows(args) -> int:
@@ -39,12 +36,8 @@ def _experiments_rows(args) -> int:
     print(f"{len(cases)} cases x {len(methods)} methods on {where}; cache {args.cache}")
     raw = row_experiments.run_row_experiments(cases, methods, config, cache_dir=args.cache, workers=args.workers,
                                               scheduler=args.scheduler)
-    written = write_results(row_experiments.ROW_EXPERIMENTS, args.output, raw, config)
-
-    print(markdown(written["table6_coverage_effort"]))
-    print(f"wrote {Path(args.output).absolute()}/ (raw_cases.csv, {', '.join(f'{n}.csv/.md' for n in written)}, "
-          f"paper_values.csv, figures/)")
-    return 0
+    return _publish(row_experiments.ROW_EXPERIMENTS, args.output, raw, config, "table6_coverage_effort",
+                    "paper_values.csv, figures/")
 
 
 def _experiments_season(args) -> int:
@@ -56,10 +49,14 @@ def _experiments_season(args) -> int:
     print(f"{len(cases)} plant(s) x {len(arms)} arm(s), {cases[0].sessions} sessions each, coverage target {target:g}; "
           f"cache {args.cache}")
     raw = season.run_season_experiments(cases, arms, config, cache_dir=args.cache, workers=args.workers)
-    written = write_results(season.SEASON_EXPERIMENTS, args.output, raw, config)
-    print(markdown(written["season_totals"]))
-    print(f"wrote {Path(args.output).absolute()}/ (raw_cases.csv, {', '.join(f'{n}.csv/.md' for n in written)}, "
-          f"figures/season.png)")
+    return _publish(season.SEASON_EXPERIMENTS, args.output, raw, config, "season_totals", "figures/season.png")
+
+
+def _publish(experiment, output, raw, config, headline: str, more: str, **options) -> int:
+    """Write the experiment's results folder, print its ``headline`` table and what was written."""
+    written = write_results(experiment, output, raw, config, **options)
+    print(markdown(written[headline]))
+    print(f"wrote {Path(output).absolute()}/ (raw_cases.csv, {', '.join(f'{n}.csv/.md' for n in written)}, {more})")
     return 0
 
 
