@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from tpvp.errors import TpvpError
-from tpvp.viz.background import draw, drawing, drawing_pool
+from tpvp.registry import load_reference
+from tpvp.viz.background import draw, drawing_pool
 
 
 class _Unpicklable(Exception):
@@ -75,7 +76,7 @@ def test_every_drawing_the_outputs_name_exists():
                 names.add(node.value)
     assert len(names) >= 5, names
     for name in names:
-        assert callable(drawing(name)), name
+        assert callable(load_reference(name)), name
 
 
 def test_a_drawing_process_killed_from_outside_is_one_line(tmp_path):

@@ -8,11 +8,11 @@ Errors the user can fix (:class:`tpvp.errors.TpvpError`) are printed on one line
 from __future__ import annotations
 
 import argparse
-import importlib
 import sys
 
 from tpvp import __version__
 from tpvp.errors import install_warning_format, run_command
+from tpvp.registry import load_reference
 
 #: Command -> ("module:function" that adds its options and handler to its parser, one-line help).
 COMMANDS = {
@@ -44,8 +44,7 @@ def build_parser(command: str | None = EVERY) -> argparse.ArgumentParser:
     for name, (where, help_line) in COMMANDS.items():
         p = sub.add_parser(name, help=help_line, description=help_line)
         if command in (name, EVERY):
-            module, function = where.split(":")
-            getattr(importlib.import_module(module), function)(p)
+            load_reference(where)(p)
     return parser
 
 

@@ -22,6 +22,13 @@ PLUGIN_GROUP = "tpvp.plugins"
 _plugins_loaded = False
 
 
+def load_reference(reference: str):
+    """The object a ``"module:attribute"`` reference names, its module imported (a command's
+    options, a drawing, an experiment sent to worker processes)."""
+    module, _, attribute = reference.partition(":")
+    return getattr(importlib.import_module(module), attribute)
+
+
 def load_plugins() -> None:
     """Import every plugin module once (each registers its methods)."""
     global _plugins_loaded

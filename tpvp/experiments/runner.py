@@ -12,7 +12,6 @@ values and its figures (written by :func:`tpvp.experiments.results.write_results
 from __future__ import annotations
 
 import hashlib
-import importlib
 import json
 import os
 import time
@@ -27,7 +26,7 @@ from tpvp.config import to_dict
 from tpvp.errors import ConfigError
 from tpvp.io import atomic_write_bytes
 from tpvp.parallel import run_cases
-from tpvp.registry import Registry
+from tpvp.registry import Registry, load_reference
 
 # Cached rows are keyed on the case, the method and the resolved configuration, not on the source:
 # a refactor keeps every cache. Bump this when a change alters any result (checked with
@@ -69,8 +68,7 @@ class Experiment:
 
 def experiment_at(reference: str) -> Experiment:
     """The :class:`Experiment` at ``"module:attribute"``."""
-    module, _, attribute = reference.partition(":")
-    return getattr(importlib.import_module(module), attribute)
+    return load_reference(reference)
 
 
 def task_key(case, method: str, config) -> str:

@@ -127,13 +127,19 @@ def partial_set_cover(visibility, required, executed=(), config: SetCoverConfig 
                 chosen, optimal, status = np.sort(greedy), False, f"{status}; greedy fallback"
             # Views the others make redundant (possible in a time-limited incumbent) are dropped.
             chosen = _prune(members, class_weights, chosen)
-            if optimal:
-                lower = chosen.size
-            elif bound is not None and np.isfinite(bound):
-                lower = max(lower, math.ceil(bound - 1e-6))
-            optimal = optimal or lower >= chosen.size
+            lower, optimal = _proven(chosen, lower, optimal, bound)
     return _result(reduced, chosen, lower, optimal, reachable, required, target, status, time.perf_counter() - t0,
                    solver)
+
+
+def _proven(chosen: np.ndarray, lower: int, optimal: bool, bound) -> tuple[int, bool]:
+    """The lower bound on the view count after a solve (the solver's, when it stated one) and
+    whether ``chosen`` is proven optimal (solver's word, or the bound meets it)."""
+    if optimal:
+        lower = chosen.size
+    elif bound is not None and np.isfinite(bound):
+        lower = max(lower, math.ceil(bound - 1e-6))
+    return lower, optimal or lower >= chosen.size
 
 
 def _goal(reduced: ReducedCoverage, required: float) -> tuple[bool, float, float]:
@@ -282,11 +288,7 @@ def partial_set_covers(visibility, required, executed=(), config: SetCoverConfig
         if found is not None and found.size <= entry["chosen"].size and \
                 _value(members, class_weights, found) >= entry["need"] - 1e-6:
             entry["chosen"] = _prune(members, class_weights, found)
-        if optimal:
-            entry["lower"] = entry["chosen"].size
-        elif bound is not None and np.isfinite(bound):
-            entry["lower"] = max(entry["lower"], math.ceil(bound - 1e-6))
-        entry["optimal"] = optimal or entry["lower"] >= entry["chosen"].size
+        entry["lower"], entry["optimal"] = _proven(entry["chosen"], entry["lower"], optimal, bound)
         entry["seconds"] += time.perf_counter() - started
 
     order = sorted(range(len(values)), key=lambda i: -values[i])

@@ -19,6 +19,7 @@ from concurrent.futures import ProcessPoolExecutor
 from contextlib import contextmanager
 
 from tpvp.errors import TpvpError
+from tpvp.registry import load_reference
 
 WORKERS = 2
 #: What the drawing process loads while the plan is computed.
@@ -108,14 +109,8 @@ def drawing_pool(workers: int = WORKERS):
         pool.close()
 
 
-def drawing(name: str):
-    """The function a drawing names (``"tpvp.viz.figures:plot_plan"``), loaded."""
-    module, function = name.split(":")
-    return getattr(importlib.import_module(module), function)
-
-
 def _draw(name: str, args, kwargs):
-    return drawing(name)(*args, **kwargs)
+    return load_reference(name)(*args, **kwargs)
 
 
 def draw(calls, pool: DrawingPool | None = None) -> list:
