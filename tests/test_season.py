@@ -96,16 +96,81 @@ def test_the_season_command_writes_its_tables_and_figure_and_resumes(tmp_path, c
 
     from tpvp.cli import main
 
-    argv = ["experiments", "season", "--quick", "--workers", "1", "--output", str(tmp_path / "out"),
-            "--cache", str(tmp_path / "cache")]
+    argv = ["experiments", "season", "--quick", "--view-spaces", "hemisphere", "--replan-after", "0", "--workers", "1",
+            "--output", str(tmp_path / "out"), "--cache", str(tmp_path / "cache")]
     assert main(argv) == 0
     out = capsys.readouterr().out
     assert "1 plant(s) x 3 arm(s), 3 sessions each, coverage target 0.98" in out
     totals = pd.read_csv(tmp_path / "out" / "season_totals.csv")
     assert totals["arm"].tolist() == ["truth", "own", "none"] and (totals["sessions"] == 2).all()
+    assert (totals["replan_after"] == 0).all()
     assert (tmp_path / "out" / "figures" / "season.png").stat().st_size > 0
     cached = sorted((tmp_path / "cache").glob("*.parquet"))
     assert len(cached) == 3  # one per (plant, arm): a second run reads them
     assert main(argv[:-4] + ["--output", str(tmp_path / "again"), "--cache", str(tmp_path / "cache")]) == 0
     assert pd.read_csv(tmp_path / "again" / "raw_cases.csv").drop(columns=["seconds_task"]).equals(
         pd.read_csv(tmp_path / "out" / "raw_cases.csv").drop(columns=["seconds_task"]))
+
+
+def test_a_row_season_chains_its_sessions_from_its_own_reconstruction(tmp_path):
+    from tpvp.config import make_config
+    from tpvp.experiments import season
+    from tpvp.experiments.rows import QUICK
+
+    case = season.RowSeasonCase("room1", 0, sessions=3)
+    config = case.config(make_config("row", QUICK))
+    series = season._row_series(case, config, tmp_path)
+    sessions = list(season.row_season_sessions(series.scans, config, ("truth", "own"), cache_dir=series.cache_dir))
+    assert [(s.row["session"], s.row["arm"]) for s in sessions] == [(2, "truth"), (2, "own"), (3, "truth"), (3, "own")]
+    # session 2 starts both arms from day 1's full scan; session 3's own prior is what session 2 saw
+    assert sessions[0].row == {**sessions[1].row, "arm": "truth"}
+    assert np.array_equal(sessions[3].prior, sessions[1].fused)
+    assert len(sessions[1].fused) < len(series.scans[1])
+    for s in sessions:
+        assert 0.9 < s.row["coverage"] <= 1.0 and s.row["views"] > 15  # the passive sweep and planned views
+
+
+def test_what_a_session_missed_partitions_todays_plant(series):
+    from tpvp.experiments.season import season_sessions
+
+    session = next(season_sessions(series[:2], CONFIG, arms=("own",)))
+    missed = session.missed(CONFIG.gt_resolution)
+    counts = {k: len(v) for k, v in missed.items()}
+    assert sum(counts.values()) == session.scene.grid.countable.sum()
+    seeable = counts["seen"] + counts["missed_in_prior"] + counts["missed_not_in_prior"]
+    assert seeable == len(session.scene.oracle)
+    assert counts["seen"] / seeable == pytest.approx(session.row["coverage"])
+
+
+def test_a_dataset_season_is_each_plants_scans_in_date_order(tmp_path, series, capsys):
+    from pathlib import Path
+
+    from tpvp.cli import main
+    from tpvp.experiments.season import dataset_season_cases
+    from tpvp.io import write_point_cloud
+
+    dates = ["2020-03-05", "2020-03-06", "2020-03-07"]
+    for date, points in zip(dates, series):
+        write_point_cloud(tmp_path / f"T01_{date}.ply", points)
+    rows = [f"Tomato01,tomato,{a},{b},1,T01_{a}.ply,T01_{b}.ply" for a, b in zip(dates, dates[1:])]
+    (tmp_path / "pairs.csv").write_text("plant,species,previous_date,current_date,days_apart,previous_file,"
+                                        "current_file\n" + "\n".join(reversed(rows)) + "\n")
+    (case,) = dataset_season_cases(tmp_path, view_spaces=("hemisphere",), replan_after=(0,))
+    assert [Path(f).name for f in case.files] == [f"T01_{d}.ply" for d in dates]
+    assert case.labels()["plant"] == "Tomato01" and case.species == "tomato"
+    with pytest.raises(ConfigError, match="no plant named Maize09"):
+        dataset_season_cases(tmp_path, plants=["Maize09"])
+    argv = ["experiments", "season", "--dataset", str(tmp_path), "--view-spaces", "hemisphere", "--replan-after", "0",
+            "--arms", "truth", "--workers", "1", "--output", str(tmp_path / "out"), "--cache", str(tmp_path / "cache")]
+    assert main(argv) == 0
+    import pandas as pd
+    from tpvp.io import read_point_cloud
+
+    raw = pd.read_csv(tmp_path / "out" / "raw_cases.csv")
+    expected = run_season([read_point_cloud(f, units="m") for f in case.files], CONFIG, arms=("truth",))
+    assert raw["views"].tolist() == expected["views"].tolist() and raw["plant"].eq("Tomato01").all()
+    # pairs that do not chain day by day are refused
+    (tmp_path / "pairs.csv").write_text("plant,species,previous_date,current_date,days_apart,previous_file,"
+                                        "current_file\n" + rows[0] + "\n" + rows[1].replace("03-06,", "03-04,", 1) + "\n")
+    assert main(argv) == 2
+    assert "do not chain day by day" in capsys.readouterr().err

@@ -118,7 +118,7 @@ def test_the_command_line_session(tmp_path, pair, capsys):
         assert f"view {view}," in capsys.readouterr().out
     assert main(["session", "plan", str(folder)]) == 0
     out = capsys.readouterr().out
-    assert "6 planned: 20, 4, 9, 7, 31, 27" in out and "next: capture view 20 (planned view 1 of 6)" in out
+    assert "6 to capture: 20, 4, 9, 7, 31, 27" in out and "next: capture view 20 (planned view 1 of 6)" in out
     plan = (folder / "plan" / "plan.csv").read_text()
     assert plan.count("planned") == 6 and (folder / "plan" / "recording.rrd").is_file()
     assert main(["session", "export", str(folder), "--model", str(tmp_path / "today.ply")]) == 0

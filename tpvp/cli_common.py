@@ -41,7 +41,8 @@ def resolved_config(args):
     for key, value in (("view_space", getattr(args, "view_space", None)), ("initial_view", initial),
                        ("scene.scale", getattr(args, "scale", None)), ("scene.radius", getattr(args, "radius", None)),
                        ("scene.up_axis", getattr(args, "up_axis", None)),
-                       ("selection.coverage_target", getattr(args, "coverage_target", None))):
+                       ("selection.coverage_target", getattr(args, "coverage_target", None)),
+                       ("selection.replan_after", getattr(args, "replan_after", None))):
         if value is not None:
             overrides[key] = value
     overrides.update(parse_overrides(args.set))
@@ -65,6 +66,12 @@ def configuration_options(p, output, named: str = "paper"):
     p.add_argument("--coverage-target", default=None, type=float, metavar="FRACTION", help=COVERAGE_TARGET_HELP)
 
 
+def replan_option(p) -> None:
+    p.add_argument("--replan-after", default=None, type=int, metavar="K",
+                   help="re-plan the rest of the plan from the captures after every K planned views "
+                        "(selection.replan_after; 0: plan once, the paper's; default: the configuration's, 0)")
+
+
 def view_space_arg(value: str) -> str:
     try:
         get_view_space(value)  # one clear error line for an unknown name or a bad file
@@ -84,6 +91,7 @@ def case_options(p, output, case_options=True, frontier=True) -> None:
                        help="also the coverage-effort frontier of this case: the plan for targets 0.90 ... 1.0 "
                             "beside the exact optimum with perfect knowledge (frontier.csv, frontier.png; "
                             "about 10-60 s more)")
+    replan_option(p)
     p.add_argument("--view-space", default=None, type=view_space_arg, metavar="SPACE",
                    help=f"candidate views: {view_space_choices()} (default: the configuration's, hemisphere)")
     p.add_argument("--initial-view", default=None, metavar="INDEX|NAME",

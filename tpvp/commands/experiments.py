@@ -5,6 +5,8 @@ from __future__ import annotations
 from pathlib import Path
 
 from tpvp.cli_common import case_options, resolved_config
+from tpvp.config import load_config, parse_overrides
+from tpvp.errors import TpvpError
 from tpvp.commands.rows import row_config, row_options
 from tpvp.experiments import plants as plant_experiments
 from tpvp.experiments import rows as row_experiments
@@ -41,10 +43,25 @@ def _experiments_rows(args) -> int:
 
 
 def _experiments_season(args) -> int:
+    if args.rows:  # the paper-row configuration, unless --config names another row one
+        config = load_config("paper-row" if args.config == "paper" else args.config, parse_overrides(args.set))
+        if config.setting != "row":
+            raise TpvpError(f"--rows plans rows; configuration {config.name!r} is a {config.setting} one")
+        cases = season.row_season_cases(args.quick, tuple(args.rooms), tuple(args.seeds),
+                                        args.sessions or season.ROW_SESSIONS)
+        arms = args.arms or list(season.ROW_SEASON_ARMS.defaults())
+        print(f"{len(cases)} row(s) x {len(arms)} arm(s), {cases[0].sessions} sessions each; cache {args.cache}")
+        raw = season.run_row_season_experiments(cases, arms, config, cache_dir=args.cache, workers=args.workers)
+        return _publish(season.ROW_SEASON_EXPERIMENTS, args.output, raw, config, "season_totals", "figures/season.png")
     config = resolved_config(args)
     target = args.coverage_target if args.coverage_target is not None else season.COVERAGE_TARGET
-    cases = season.season_cases(args.quick, tuple(args.species), tuple(args.seeds), args.sessions,
-                                tuple(args.view_spaces), target)
+    if args.dataset is not None:
+        cases = season.dataset_season_cases(args.dataset, args.plants, args.quick, tuple(args.view_spaces), target,
+                                            tuple(args.replan_after_values))
+    else:
+        cases = season.season_cases(args.quick, tuple(args.species), tuple(args.seeds),
+                                    args.sessions or season.SESSIONS, tuple(args.view_spaces), target,
+                                    tuple(args.replan_after_values))
     arms = args.arms or list(season.SEASON_ARMS.defaults())
     print(f"{len(cases)} plant(s) x {len(arms)} arm(s), {cases[0].sessions} sessions each, coverage target {target:g}; "
           f"cache {args.cache}")
@@ -103,14 +120,30 @@ def experiments_arguments(experiments) -> None:
     case_options(seasons, "outputs/experiments/season", case_options=False)
     seasons.add_argument("--species", nargs="+", default=list(season.SPECIES), choices=season.SPECIES,
                          help="(default: %(default)s)")
-    seasons.add_argument("--seeds", nargs="+", type=int, default=[0], help="generated plants (default: %(default)s)")
-    seasons.add_argument("--sessions", type=int, default=season.SESSIONS,
-                         help="scans of each plant, two days apart (default: %(default)s)")
-    seasons.add_argument("--view-spaces", nargs="+", default=["hemisphere"], help="(default: %(default)s)")
+    seasons.add_argument("--seeds", nargs="+", type=int, default=list(season.SEEDS),
+                         help="generated plants (default: %(default)s)")
+    seasons.add_argument("--sessions", type=int, default=None,
+                         help=f"scans of each plant, two days apart, or of each row (default: {season.SESSIONS} for a "
+                              f"plant, {season.ROW_SESSIONS} for a row)")
+    seasons.add_argument("--dataset", type=Path, default=None,
+                         help="a folder written by `python -m data_tools pheno4d prepare`: one season per plant, its "
+                              "scans in date order (default: generated plants)")
+    seasons.add_argument("--plants", nargs="+", default=None, help="only these plants of the dataset (e.g. Tomato01)")
+    seasons.add_argument("--rows", action="store_true",
+                         help="the greenhouse rows' season instead: generated rows of --rooms, each session planned at "
+                              "4 cm (the paper-row configuration); --species, --view-spaces and --replan-after do not "
+                              "apply")
+    seasons.add_argument("--rooms", nargs="+", default=list(season.ROOMS), help="(with --rows; default: %(default)s)")
+    seasons.add_argument("--view-spaces", nargs="+", default=list(season.VIEW_SPACES), help="(default: %(default)s)")
+    seasons.add_argument("--replan-after", nargs="+", type=int, default=list(season.REPLAN_AFTER), metavar="K",
+                         dest="replan_after_values",
+                         help="re-plan each session's plan from its captures after every K planned views; several "
+                              "values run the season once per value, 0 = plan once (default: %(default)s)")
     seasons.add_argument("--arms", nargs="+", default=None,
                          help=f"priors to plan from ({season.SEASON_ARMS.describe()})")
     seasons.add_argument("--quick", action="store_true",
-                         help=f"one tomato, {season.QUICK['sessions']} sessions (about 15 s)")
+                         help=f"one tomato, {season.QUICK['sessions']} sessions, in each view space and "
+                              f"re-planning asked (about 15 s per view space and re-planning)")
     seasons.add_argument("--workers", type=int, default=2, help="parallel processes (default: %(default)s)")
     seasons.add_argument("--cache", default="outputs/cache/season",
                          help="cache folder of per-(plant, arm) rows; an interrupted run resumes (default: %(default)s)")

@@ -36,6 +36,7 @@ def _print_case(result, summary, folder, compile_seconds, pieces):
             ("time: planning (inflation..path)", f"{result.timings['planning']:.2f} s"),
             ("time: numba compile / cache load", f"{compile_seconds:.2f} s (kernels: {', '.join(pieces)}; "
                                                  "not part of the run)")]
+    rows += [(f"re-plan {i}", step.line()) for i, step in enumerate(result.replans, 1)]
     print_rows(rows, folder, "results, plan.csv in the scan frame, plan_normalised.csv, plan.json, config.yaml, "
                               "provenance.json, plan.png, coverage.png, recording.rrd")
 

@@ -111,9 +111,8 @@ def bundled_instance() -> Instance:
     return Instance("tomato-real-0305-0306", "tomato", "bundled")
 
 
-def dataset_instances(folder, plants=None, pairs=None, paper_subset: bool = False) -> list[Instance]:
-    """Every pair of a prepared dataset's ``pairs.csv`` (or the selected ``plants`` / ``pairs``
-    row numbers; ``paper_subset``: plants 1-3 of each species, their first pair)."""
+def dataset_table(folder, plants=None) -> pd.DataFrame:
+    """A prepared dataset's ``pairs.csv`` (only ``plants`` when given), every listed file checked."""
     folder = Path(folder)
     table_path = folder / "pairs.csv"
     if not table_path.is_file():
@@ -128,6 +127,20 @@ def dataset_instances(folder, plants=None, pairs=None, paper_subset: bool = Fals
     table = table.reset_index(drop=True)
     if plants:
         table = table[table["plant"].isin(list(plants))]
+    for name in (*table["previous_file"], *table["current_file"]):
+        if not (folder / name).is_file():
+            raise InputFileError(f"{folder / name}: listed in {table_path} but missing")
+    return table
+
+
+def dataset_instances(folder, plants=None, pairs=None, paper_subset: bool = False) -> list[Instance]:
+    """Every pair of a prepared dataset's ``pairs.csv`` (or the selected ``plants`` / ``pairs``
+    row numbers; ``paper_subset``: plants 1-3 of each species, their first pair)."""
+    folder = Path(folder)
+    table_path = folder / "pairs.csv"
+    table = dataset_table(folder)
+    if plants:
+        table = table[table["plant"].isin(list(plants))]
     if pairs:
         table = table.loc[[i for i in pairs if i in table.index]]
     if paper_subset:
@@ -139,9 +152,6 @@ def dataset_instances(folder, plants=None, pairs=None, paper_subset: bool = Fals
     out = []
     for row in table.itertuples():
         files = [folder / f for f in (row.previous_file, row.current_file)]
-        for f in files:
-            if not f.is_file():
-                raise InputFileError(f"{f}: listed in {table_path} but missing")
         out.append(Instance(f"{row.plant}-{row.previous_date}-{row.current_date}", str(row.species).lower(),
                             "dataset", 0, str(files[0]), str(files[1])))
     return out

@@ -14,22 +14,30 @@ today's plant the registered prior held nothing near.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
 from tpvp.config import PlantConfig, make_config, with_overrides
-from tpvp.errors import ConfigError
+from tpvp.errors import ConfigError, InputFileError
 from tpvp.experiments import runner
 from tpvp.experiments.results import mean_std
 from tpvp.experiments.runner import Experiment
 from tpvp.experiments.baselines import nbv_curve
+from tpvp.experiments.greenhouse import build_row_scene, execute, observed_points, run_row_case
+from tpvp.experiments.plants import dataset_table
+from tpvp.io import read_point_cloud
 from tpvp.experiments.single_plant import build_scene, run_case
 from tpvp.metrics import chamfer_distance
+from tpvp.nbv.blockwise import blockwise_nbv
 from tpvp.registry import Registry
 from tpvp.scene import voxels
+from tpvp.scene.boxes import room_config
 from tpvp.scene.simulator import scan_points
+from tpvp.synthetic.greenhouse import generate_row_sessions
 from tpvp.synthetic.plants import generate_growth_series
+from tpvp.synthetic.scan import reference_points
 from tpvp.visibility import covered_voxels
 from tpvp.viz.experiments import plot_season
 
@@ -41,6 +49,9 @@ SEASON_ARMS = Registry("season arm")
 COVERAGE_TARGET = 0.98
 SPECIES = ("tomato", "maize")
 SESSIONS = 6
+SEEDS = (0, 1, 2)
+VIEW_SPACES = ("hemisphere", "sphere")
+REPLAN_AFTER = (0, 1)  # plan once; re-plan after every planned view (as the re-planning rule was calibrated)
 QUICK = {"species": ("tomato",), "seeds": (0,), "sessions": 3}
 SEASON_COLUMNS = ("session", "arm", "views", "coverage", "path_length_m", "chamfer_fused_mm",
                   "registration_chamfer_mm", "prior_missing", "prior_points")
@@ -52,18 +63,24 @@ def reconstruction(scene, views) -> np.ndarray:
     return scene.grid.centres[covered_voxels(scene.truth_visibility, list(views))]
 
 
+def held_near(points: np.ndarray, prior: np.ndarray, voxel: float) -> np.ndarray:
+    """Which ``points`` have a point of ``prior`` in their voxel or a voxel next to it
+    (26-neighbourhood, ``voxel`` metres)."""
+    held = voxels.encode_keys(voxels.voxelise(prior, voxel))
+    keys = voxels.voxel_keys(points, voxel)
+    found = np.zeros(len(points), bool)
+    for offset in np.stack(np.meshgrid(*[np.arange(-1, 2)] * 3, indexing="ij"), axis=-1).reshape(-1, 3):
+        found |= np.isin(voxels.encode_keys(keys + offset), held)
+    return found
+
+
 def prior_missing(scene, warped: np.ndarray, voxel: float) -> float:
     """The share of today's plant voxels with no point of the registered prior in them or in a
-    voxel next to them (26-neighbourhood, ``voxel`` metres)."""
+    voxel next to them (:func:`held_near`)."""
     plant = scene.grid.centres[scene.grid.countable]
     if len(plant) == 0:
         return float("nan")
-    held = voxels.encode_keys(voxels.voxelise(warped, voxel))
-    keys = voxels.voxel_keys(plant, voxel)
-    found = np.zeros(len(plant), bool)
-    for offset in np.stack(np.meshgrid(*[np.arange(-1, 2)] * 3, indexing="ij"), axis=-1).reshape(-1, 3):
-        found |= np.isin(voxels.encode_keys(keys + offset), held)
-    return float(1.0 - found.mean())
+    return float(1.0 - held_near(plant, warped, voxel).mean())
 
 
 def _without_prior(scene, config: PlantConfig):
@@ -76,16 +93,48 @@ def _without_prior(scene, config: PlantConfig):
     return steps, float(last["coverage"]), float(last["path_length"]), curve["view"].iloc[:steps].astype(int).tolist()
 
 
-def run_season(series, config: PlantConfig = PlantConfig(), arms=ARMS, name: str = "plant") -> pd.DataFrame:
-    """One row per session (2 .. n: the day planned) and arm. ``series``: the plant's scans in
-    order (points, metres), day 1 first."""
+@dataclass(frozen=True, eq=False)
+class SeasonSession:
+    """One session of one arm: today's case (``scene``: the arm's prior registered against today's
+    ground truth), the prior it planned from (scan frame), the views it executed, what they saw of
+    today's plant (``fused``, planning frame), the registered prior (``warped``, planning frame;
+    None for ``none``) and the session's row of :data:`SEASON_COLUMNS`."""
+
+    scene: object
+    prior: np.ndarray
+    order: list
+    fused: np.ndarray
+    warped: np.ndarray | None
+    row: dict
+
+    def missed(self, voxel: float) -> dict:
+        """Today's plant voxel centres (planning frame) by what became of them: ``seen``, missed
+        where the registered prior held nothing near (``missed_not_in_prior``: growth or a hole of
+        the prior), missed though the prior held them (``missed_in_prior``: left by the plan, or
+        seen only from views it did not take) and ``unseeable`` (no candidate view sees them: not
+        counted by the coverage)."""
+        scene = self.scene
+        plant = scene.grid.countable_ids
+        centres = scene.grid.centres[plant]
+        seen = np.isin(plant, covered_voxels(scene.truth_visibility, list(self.order)))
+        seeable = np.isin(plant, scene.oracle)
+        held = (held_near(centres, self.warped, voxel) if self.warped is not None
+                else np.zeros(len(plant), bool))
+        missed = seeable & ~seen
+        return {"seen": centres[seen], "missed_in_prior": centres[missed & held],
+                "missed_not_in_prior": centres[missed & ~held], "unseeable": centres[~seeable]}
+
+
+def season_sessions(series, config: PlantConfig = PlantConfig(), arms=ARMS, name: str = "plant"):
+    """Every session (2 .. n: the day planned) of every arm, in order, as :class:`SeasonSession`.
+    ``series``: the plant's scans in order (points, metres), day 1 first."""
     series = [np.asarray(points, dtype=np.float64) for points in series]
     if len(series) < 2:
         raise ConfigError(f"{name}: a season needs at least 2 scans, got {len(series)}")
     unknown = [arm for arm in arms if arm not in ARMS]
     if unknown:
         raise ConfigError(f"unknown season arm {unknown[0]!r}; choose from {', '.join(ARMS)}")
-    rows, own = [], series[0]  # session 1 starts from day 1's full scan
+    own = series[0]  # session 1 starts from day 1's full scan
     for day in range(1, len(series)):
         next_own = own
         for arm in arms:
@@ -93,6 +142,7 @@ def run_season(series, config: PlantConfig = PlantConfig(), arms=ARMS, name: str
             scene = build_scene(prior, series[day], config,
                                 names=(f"{name} day {day} ({arm} prior)", f"{name} day {day + 1}"))
             per_mm = 1e3 / scene.scan_scale  # planning-frame metres -> the scans' millimetres
+            warped = None
             if arm == "none":
                 views, coverage, path_length, order = _without_prior(scene, config)
                 registration = missing = float("nan")
@@ -100,16 +150,23 @@ def run_season(series, config: PlantConfig = PlantConfig(), arms=ARMS, name: str
                 result = run_case(scene, config)
                 views, coverage, path_length, order = result.n_views, result.coverage, result.path_length, result.order
                 registration = per_mm * result.chamfer_after
-                missing = prior_missing(scene, result.clouds["warped"], config.gt_resolution)
+                warped = result.clouds["warped"]
+                missing = prior_missing(scene, warped, config.gt_resolution)
             fused = reconstruction(scene, order)
-            rows.append({"session": day + 1, "arm": arm, "views": views, "coverage": coverage,
-                         "path_length_m": path_length, "chamfer_fused_mm": per_mm * chamfer_distance(fused, scene.current),
-                         "registration_chamfer_mm": registration, "prior_missing": missing,
-                         "prior_points": 0 if arm == "none" else len(prior)})
+            row = {"session": day + 1, "arm": arm, "views": views, "coverage": coverage,
+                   "path_length_m": path_length, "chamfer_fused_mm": per_mm * chamfer_distance(fused, scene.current),
+                   "registration_chamfer_mm": registration, "prior_missing": missing,
+                   "prior_points": 0 if arm == "none" else len(prior)}
+            yield SeasonSession(scene, prior, list(order), fused, warped, row)
             if arm == "own":
                 next_own = scan_points(scene.plant_from_scan, fused)
         own = next_own
-    return pd.DataFrame(rows, columns=list(SEASON_COLUMNS))
+
+
+def run_season(series, config: PlantConfig = PlantConfig(), arms=ARMS, name: str = "plant") -> pd.DataFrame:
+    """One row per session (2 .. n: the day planned) and arm (:func:`season_sessions`)."""
+    return pd.DataFrame([session.row for session in season_sessions(series, config, arms, name)],
+                        columns=list(SEASON_COLUMNS))
 
 
 @dataclass(frozen=True)
@@ -122,24 +179,60 @@ class SeasonCase:
     days: float = 2.0
     view_space: str = "hemisphere"
     coverage_target: float = COVERAGE_TARGET
+    replan_after: int = 0  # selection.replan_after of every session's plan (the none arm has no plan)
+    files: tuple = ()  # a dataset plant's scans, day by day (metric point clouds); empty: generated
+    plant: str = ""  # the dataset's plant name
 
     def config(self, base: PlantConfig) -> PlantConfig:
-        return with_overrides(base, {"view_space": self.view_space, "selection.coverage_target": self.coverage_target})
+        return with_overrides(base, {"view_space": self.view_space, "selection.coverage_target": self.coverage_target,
+                                     "selection.replan_after": self.replan_after})
 
     def labels(self) -> dict:
-        return {"plant": f"{self.species}-generated-{self.seed}", "species": self.species, "seed": self.seed,
-                "view_space": self.view_space, "coverage_target": self.coverage_target}
+        return {"plant": self.plant or f"{self.species}-generated-{self.seed}", "species": self.species,
+                "seed": self.seed, "view_space": self.view_space, "coverage_target": self.coverage_target,
+                "replan_after": self.replan_after}
 
 
-def season_cases(quick: bool = False, species=SPECIES, seeds=(0,), sessions: int = SESSIONS,
-                 view_spaces=("hemisphere",), coverage_target: float = COVERAGE_TARGET) -> list[SeasonCase]:
+def season_cases(quick: bool = False, species=SPECIES, seeds=SEEDS, sessions: int = SESSIONS,
+                 view_spaces=VIEW_SPACES, coverage_target: float = COVERAGE_TARGET,
+                 replan_after=REPLAN_AFTER) -> list[SeasonCase]:
+    """The full protocol's seasons (by default), or the quick ones (one tomato, 3 sessions, each
+    view space and re-planning asked)."""
     if quick:
         species, seeds, sessions = QUICK["species"], QUICK["seeds"], QUICK["sessions"]
-    return [SeasonCase(s, int(seed), int(sessions), view_space=v, coverage_target=float(coverage_target))
-            for v in view_spaces for s in species for seed in seeds]
+    return [SeasonCase(s, int(seed), int(sessions), view_space=v, coverage_target=float(coverage_target),
+                       replan_after=int(k))
+            for k in replan_after for v in view_spaces for s in species for seed in seeds]
+
+
+def dataset_season_cases(folder, plants=None, quick: bool = False, view_spaces=VIEW_SPACES,
+                         coverage_target: float = COVERAGE_TARGET, replan_after=REPLAN_AFTER) -> list[SeasonCase]:
+    """Every plant of a prepared dataset (``python -m data_tools pheno4d prepare``: ``pairs.csv``
+    and its metric clouds), its scans in date order, one season per plant (or only ``plants``;
+    ``quick``: the first plant's first three scans)."""
+    table = dataset_table(folder, plants)
+    if table.empty:
+        raise ConfigError(f"{Path(folder) / 'pairs.csv'}: no plant named {', '.join(map(str, plants))}")
+    cases = []
+    for plant, rows in table.groupby("plant", sort=True):
+        rows = rows.sort_values("previous_date")
+        files = [*rows["previous_file"], rows["current_file"].iloc[-1]]
+        days = list(zip(rows["current_date"].iloc[:-1], rows["previous_date"].iloc[1:]))
+        if any(str(a) != str(b) for a, b in days):
+            raise InputFileError(f"{Path(folder) / 'pairs.csv'}: {plant}'s pairs do not chain day by day "
+                                 f"({', '.join(f'{a} then {b}' for a, b in days if str(a) != str(b))})")
+        files = tuple(str(Path(folder) / f) for f in files)[:3 if quick else None]
+        cases += [SeasonCase(str(rows["species"].iloc[0]).lower(), 0, len(files), view_space=v,
+                             coverage_target=float(coverage_target), replan_after=int(k), files=files, plant=str(plant))
+                  for k in replan_after for v in view_spaces]
+        if quick:
+            break
+    return cases
 
 
 def _series(case: SeasonCase, case_config, cache_dir=None) -> list:
+    if case.files:
+        return [read_point_cloud(Path(f), units="m") for f in case.files]
     return [sample.points for sample in generate_growth_series(case.species, case.seed, case.sessions, case.days)]
 
 
@@ -160,10 +253,11 @@ def tables(raw: pd.DataFrame) -> dict:
     coverage of any session, and how far the fused model's Chamfer distance drifted (last session
     minus the first)."""
     rows = raw.rename(columns={"method": "arm"})
-    per_session = mean_std(rows, ["view_space", "session", "arm"],
+    rows = rows.assign(replan_after=rows["replan_after"] if "replan_after" in rows else 0)
+    per_session = mean_std(rows, ["view_space", "replan_after", "session", "arm"],
                            columns=("views", "coverage", "path_length_m", "chamfer_fused_mm",
                                     "registration_chamfer_mm", "prior_missing"))
-    season = rows.groupby(["view_space", "plant", "arm"], sort=False).agg(
+    season = rows.groupby(["view_space", "replan_after", "plant", "arm"], sort=False).agg(
         sessions=("session", "size"), total_views=("views", "sum"), lowest_coverage=("coverage", "min"),
         chamfer_first_mm=("chamfer_fused_mm", "first"), chamfer_last_mm=("chamfer_fused_mm", "last"),
         path_length_m=("path_length_m", "sum")).reset_index()
@@ -179,7 +273,7 @@ def _figures(folder, raw: pd.DataFrame, written: dict, config) -> None:
 
 
 SEASON_EXPERIMENTS = Experiment("season experiments", SEASON_ARMS, _series,
-                                order=("view_space", "plant", "method", "session"), tables=tables,
+                                order=("view_space", "replan_after", "plant", "method", "session"), tables=tables,
                                 figures=_figures, reference=f"{__name__}:SEASON_EXPERIMENTS")
 
 
@@ -187,4 +281,123 @@ def run_season_experiments(cases, arms=ARMS, config: PlantConfig | None = None, 
                            progress: bool = True) -> pd.DataFrame:
     """Every (plant, arm) season, cached and resumable like the other experiments; the raw table."""
     return runner.run_experiments(SEASON_EXPERIMENTS, cases, arms, config or make_config("plant"), cache_dir,
+                                  workers, progress)
+
+
+# --------------------------------------------------------------------------------------------------
+# greenhouse rows
+# --------------------------------------------------------------------------------------------------
+
+#: A row's season: the rooms, the scans of each (generated, one per date), and the ``none`` arm's
+#: stopping coverage: a row is planned for all of its 4 cm planning surface (coverage target 1),
+#: which reaches 99.3 % on average (Table VI); the block-wise NBV (the rows' sequential NBV) runs
+#: until it sees 99 % of the oracle, or :data:`ROW_NONE_MAX_VIEWS`.
+ROOMS = ("room1", "room4")
+ROW_SESSIONS = 5
+ROW_NONE_TARGET = 0.99
+ROW_NONE_MAX_VIEWS = 500
+ROW_QUICK = {"rooms": ("room1",), "sessions": 3}
+ROW_SEASON_ARMS = Registry("row season arm")
+
+
+def row_season_sessions(series, config, arms=ARMS, name: str = "row", cache_dir=None):
+    """A row's sessions (2 .. n) per arm, as :func:`season_sessions` for a plant: ``series``: the
+    row's scans in order (room frame, metres); the ``own`` prior is what the previous session's
+    passive sweep and planned views saw (the observed points of its voxels); ``none`` is the
+    block-wise NBV until :data:`ROW_NONE_TARGET`. ``cache_dir``: the oracles' disk cache."""
+    series = [np.asarray(points, dtype=np.float64) for points in series]
+    if len(series) < 2:
+        raise ConfigError(f"{name}: a season needs at least 2 scans, got {len(series)}")
+    own = series[0]
+    for day in range(1, len(series)):
+        next_own = own
+        for arm in arms:
+            prior = series[day - 1] if arm in ("truth", "none") else own
+            scene = build_row_scene(prior, series[day], config, cache_dir=cache_dir,
+                                    names=(f"{name} day {day} ({arm} prior)", f"{name} day {day + 1}"))
+            warped = None
+            if arm == "none":
+                run = blockwise_nbv(scene.grid, scene.room, ROW_NONE_MAX_VIEWS, config.blockwise, sensor=config.sensor,
+                                    seed=config.seed, progress=False)
+                curve = run.coverage_curve(scene.oracle)
+                reached = np.flatnonzero(curve >= ROW_NONE_TARGET - 1e-12)
+                views = int(reached[0]) if len(reached) else len(run)
+                coverage, path_length = float(curve[views]), run.path_after(views)
+                seen = np.flatnonzero(run.covered_after(views))
+                registration = missing = float("nan")
+            else:
+                result = run_row_case(scene, config)
+                views, coverage, path_length = result.n_views, result.coverage, result.path_length
+                seen = np.union1d(execute(scene, result.positions, result.look_ats), scene.passive_seen)
+                warped = result.transfer.alignment.warped
+                registration = 1e3 * result.transfer.alignment.chamfer_after
+                missing = prior_missing(scene, warped, config.gt_resolution)
+            fused = observed_points(scene.grid, scene.current)[seen]
+            row = {"session": day + 1, "arm": arm, "views": views, "coverage": coverage, "path_length_m": path_length,
+                   "chamfer_fused_mm": 1e3 * chamfer_distance(fused, scene.current),
+                   "registration_chamfer_mm": registration, "prior_missing": missing,
+                   "prior_points": 0 if arm == "none" else len(prior)}
+            yield SeasonSession(scene, prior, [], fused, warped, row)
+            if arm == "own":
+                next_own = fused
+        own = next_own
+
+
+@dataclass(frozen=True)
+class RowSeasonCase:
+    """One generated row's season: ``sessions`` scans of ``room`` (the ``handheld`` reference)."""
+
+    room: str
+    seed: int = 0
+    sessions: int = ROW_SESSIONS
+    point_spacing: float = 0.004
+
+    def config(self, base):
+        return with_overrides(base, {"view_space": self.room})
+
+    def labels(self) -> dict:
+        return {"plant": f"{self.room}-generated-{self.seed}", "room": self.room, "seed": self.seed,
+                "view_space": self.room, "replan_after": 0}
+
+
+def row_season_cases(quick: bool = False, rooms=ROOMS, seeds=(0,), sessions: int = ROW_SESSIONS) -> list:
+    if quick:
+        rooms, sessions = ROW_QUICK["rooms"], ROW_QUICK["sessions"]
+    return [RowSeasonCase(room, int(seed), int(sessions)) for room in rooms for seed in seeds]
+
+
+@dataclass(frozen=True)
+class _RowSeries:
+    scans: list
+    cache_dir: str | None
+
+
+def _row_series(case: RowSeasonCase, case_config, cache_dir=None) -> _RowSeries:
+    room = room_config(case.room)
+    scans = [reference_points(s.points, room, "handheld")
+             for s in generate_row_sessions(case.room, case.seed, case.sessions, case.point_spacing)]
+    return _RowSeries(scans, str(Path(cache_dir) / "oracles") if cache_dir else None)
+
+
+def _row_arm(name: str):
+    def run(series: _RowSeries, config):
+        return [dict(session.row) for session in row_season_sessions(series.scans, config, (name,),
+                                                                     cache_dir=series.cache_dir)]
+    return run
+
+
+for _name, _help in (("truth", "each session from the previous day's ground-truth scan (the paper's protocol)"),
+                     ("own", "each session from what the previous session's passive sweep and planned views saw"),
+                     ("none", f"no prior: the block-wise NBV until {100 * ROW_NONE_TARGET:g} % of the oracle")):
+    ROW_SEASON_ARMS.register(_name, _help, default=True)(_row_arm(_name))
+
+ROW_SEASON_EXPERIMENTS = Experiment("row season experiments", ROW_SEASON_ARMS, _row_series,
+                                    order=("view_space", "plant", "method", "session"), tables=tables,
+                                    figures=_figures, reference=f"{__name__}:ROW_SEASON_EXPERIMENTS")
+
+
+def run_row_season_experiments(cases, arms=ARMS, config=None, cache_dir=None, workers: int = 1,
+                               progress: bool = True) -> pd.DataFrame:
+    """Every (row, arm) season, cached and resumable; the raw table."""
+    return runner.run_experiments(ROW_SEASON_EXPERIMENTS, cases, arms, config or make_config("row"), cache_dir,
                                   workers, progress)

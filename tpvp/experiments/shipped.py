@@ -29,8 +29,8 @@ import pandas as pd
 
 from tpvp.config import make_config
 from tpvp.errors import ConfigError, run_command
-from tpvp.experiments import ablation, plants, rows
-from tpvp.experiments.runner import experiment_cache
+from tpvp.experiments import ablation, plants, rows, season
+from tpvp.experiments.runner import cached_experiments, experiment_cache
 from tpvp.io import atomic_write_bytes, atomic_write_text
 
 ROOT = Path(__file__).resolve().parent.parent.parent
@@ -45,7 +45,7 @@ class Protocol:
     """What one notebook's tables are made of: the ``setting``'s full cases (rows: of
     ``references``; ``first_case_only`` for the timing of one case) and ``methods``."""
 
-    setting: str  # "plants" or "rows"
+    setting: str  # "plants", "rows" or "season"
     methods: tuple
     references: tuple = ("handheld",)
     first_case_only: bool = False
@@ -54,6 +54,8 @@ class Protocol:
     def cases(self) -> list:
         if self.setting == "plants":
             return plants.default_cases(quick=False)
+        if self.setting == "season":
+            return season.season_cases()
         cases = rows.default_row_cases(quick=False, references=self.references)
         return cases[:1] if self.first_case_only else cases
 
@@ -62,6 +64,9 @@ class Protocol:
         if self.setting == "plants":
             return plants.run_experiments(self.cases(), list(self.methods), cache_dir=cache_dir, workers=self.workers,
                                           progress=progress)
+        if self.setting == "season":
+            return season.run_season_experiments(self.cases(), self.methods, cache_dir=cache_dir, workers=self.workers,
+                                                 progress=progress)
         return rows.run_row_experiments(self.cases(), list(self.methods), make_config("row"), cache_dir=cache_dir,
                                         workers=self.workers, progress=progress)
 
@@ -69,6 +74,9 @@ class Protocol:
         """The protocol's rows from ``cache_dir`` when every (case, method) is there, else None."""
         if self.setting == "plants":
             return plants.cached_experiments(self.cases(), list(self.methods), cache_dir=cache_dir)
+        if self.setting == "season":
+            return cached_experiments(season.SEASON_EXPERIMENTS, self.cases(), list(self.methods),
+                                      make_config("plant"), cache_dir)
         return rows.cached_row_experiments(self.cases(), list(self.methods), make_config("row"), cache_dir=cache_dir)
 
 

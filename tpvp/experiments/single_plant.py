@@ -15,9 +15,10 @@ import numpy as np
 from scipy import sparse
 
 from tpvp.config import PlantConfig
-from tpvp.nbv.warm_up import warm_up
-from tpvp.pipeline.plant import CaseResult, Known, PlanningSurface, Transfer, plan
+from tpvp.nbv.warm_up import start_nbv, warm_up
+from tpvp.pipeline.plant import CaseResult, Known, PlanningSurface, Transfer, plan, planning_surface
 from tpvp.pipeline.plant import transfer as transfer_known
+from tpvp.pipeline.replan import prediction_of, replan
 from tpvp.scene.simulator import Scene, build_scene, observation  # noqa: F401 (callers build the case's scene here)
 from tpvp.visibility import coverage_ratio, covered_voxels
 
@@ -64,8 +65,32 @@ def run_case(scene: Scene, config: PlantConfig = PlantConfig(), progress=None,
     (methods that differ only after registration share it); ``surface``: likewise its
     :func:`tpvp.pipeline.plant.planning_surface` (plans that differ only in the selection share it)."""
     transferred = transferred or transfer(scene, config, progress)
+    surface = surface or planning_surface(known(scene), config, transferred, progress)
     result = plan(known(scene), config, transferred, progress, surface)
+    if config.selection.replan_after:
+        result = execute_replanning(scene, config, transferred, result, surface, progress)
     executed, planned = result.executed_views, result.planned_views
     return replace(result, coverage=coverage_ratio(covered_voxels(scene.truth_visibility, executed + planned),
                                                    scene.oracle),
                    coverage_warm_up=coverage_ratio(covered_voxels(scene.truth_visibility, executed), scene.oracle))
+
+
+def execute_replanning(scene: Scene, config: PlantConfig, transferred: Transfer, result: CaseResult,
+                       surface: PlanningSurface, progress=None) -> CaseResult:
+    """Execute ``result``'s plan on the ground truth ``selection.replan_after`` views at a time,
+    re-planning the rest from the captures after each batch (:func:`tpvp.pipeline.replan.replan`),
+    until no view is left. The result holds every re-plan's row; its timings add the re-planning."""
+    step = config.selection.replan_after
+    nbv = start_nbv(scene, config)  # a copy of the warm-up's state: ``transferred`` may be shared
+    for view, seen in zip(transferred.nbv.executed, transferred.nbv.observations):
+        nbv.integrate(view, seen)
+    warm_up_views, timings = len(result.executed_views), dict(result.timings)
+    prediction, rows = prediction_of(surface, warm_up_views), []
+    while left := result.planned_views[len(nbv.executed) - warm_up_views:]:
+        for view in left[:step]:
+            nbv.integrate(view, observation(scene, view))
+        result, prediction, row = replan(known(scene), config, nbv, warm_up_views, result.planned_views, prediction,
+                                         progress)
+        rows.append(row)
+    return replace(result, replans=tuple(rows),
+                   timings={**timings, "replanning": sum(row.seconds for row in rows)})

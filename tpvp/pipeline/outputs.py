@@ -86,6 +86,9 @@ def write_plan_outputs(folder, known, result, config, name: str = "case", extra_
                "path_length_scan_m": result.path_length / known.scan_scale,
                **{f"scan_{k}": v for k, v in (known.reduction or {}).items()},
                **_results(result, measured), **(extra_summary or {})}
+    replans = [{"plan": f"re-plan {i}", **step.row()} for i, step in enumerate(result.replans, 1)]
+    if replans:  # results.csv: the final plan's row, then one row per re-plan
+        summary = {"plan": "final", **summary, "replan_steps": replans}
     _write_results(folder, summary, config, "tpvp plan/demo",
                    {"registration": getattr(config.registration.embedded_deformation, "seed", None)})
 
@@ -159,7 +162,9 @@ def write_row_plan_outputs(folder, known, result, config, name: str = "row case"
 def _write_results(folder: Path, summary: dict, config, command: str, seeds: dict) -> None:
     """``results.json``, ``results.csv``, the resolved ``config.yaml`` and ``provenance.json``."""
     atomic_write_text(folder / "results.json", json.dumps(summary, indent=2, default=float) + "\n")
-    atomic_write_text(folder / "results.csv", pd.DataFrame([summary]).to_csv(index=False))
+    steps = summary.get("replan_steps", [])
+    row = {k: v for k, v in summary.items() if k != "replan_steps"}
+    atomic_write_text(folder / "results.csv", pd.DataFrame([row, *steps]).to_csv(index=False))
     atomic_write_text(folder / "config.yaml", config_yaml(config, "resolved configuration of this run; "
                                                           f"re-run with: {command} --config config.yaml"))
     atomic_write_text(folder / "provenance.json", json.dumps(provenance(config, seeds), indent=2) + "\n")

@@ -75,6 +75,7 @@ class CaseResult(PlanResult):
     clouds: dict  # coarse, previous, warped, inflation, planning (for figures and recordings)
     obstacle: tuple  # (centre, radius) of the path's collision sphere
     planning_target: float = 1.0  # fraction of the planning surface the selection had to see
+    replans: tuple = ()  # tpvp.pipeline.replan.Replan rows, in order (selection.replan_after)
 
     @property
     def order(self) -> list:
@@ -106,6 +107,8 @@ class CaseResult(PlanResult):
             "chamfer_before_mm": 1e3 * self.chamfer_before, "chamfer_after_mm": 1e3 * self.chamfer_after,
             **self.selection_summary(), **solver, "tsp_optimal": self.tsp.optimal, "tsp_method": self.tsp.method,
             "warnings": " | ".join(self.warnings),
+            **({"replans": len(self.replans), "views_added_by_replanning": sum(r.views_added for r in self.replans),
+                "views_dropped_by_replanning": sum(r.views_dropped for r in self.replans)} if self.replans else {}),
             **{f"seconds_{k}": v for k, v in self.timings.items()},
         }
 

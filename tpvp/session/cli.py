@@ -15,7 +15,7 @@ import signal
 import sys
 from pathlib import Path
 
-from tpvp.cli_common import COVERAGE_TARGET_HELP, case_options, print_warnings, resolved_config
+from tpvp.cli_common import COVERAGE_TARGET_HELP, case_options, print_warnings, replan_option, resolved_config
 from tpvp.config import parse_overrides
 from tpvp.errors import InputFileError, TpvpError
 from tpvp.io import read_point_cloud
@@ -69,6 +69,7 @@ def session_arguments(session) -> None:
     plan.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                       help="override one configuration key for this plan")
     plan.add_argument("--coverage-target", default=None, type=float, metavar="FRACTION", help=COVERAGE_TARGET_HELP)
+    replan_option(plan)
     _wait_option(plan)
     plan.set_defaults(func=_session_plan)
     export = steps.add_parser("export", help="write today's fused model (the next session's --previous)")
@@ -188,11 +189,16 @@ def _session_plan(args) -> int:
     overrides = parse_overrides(args.set)
     if args.coverage_target is not None:
         overrides["selection.coverage_target"] = args.coverage_target
+    if args.replan_after is not None:
+        overrides["selection.replan_after"] = args.replan_after
     with _held(args) as session:
         result = session.plan(overrides)
-        planned = session.state["plan"]["planned_views"]
-        print(f"  views (captures included)         {result.n_views} ({result.n_views - len(planned)} captured, "
-              f"{len(planned)} planned: {_views_listed(planned)})")
+        captured = {c["view"] for c in session.captures}
+        left = [v for v in session.state["plan"]["planned_views"] if v not in captured]
+        if result.replans:
+            print(f"  re-plan {len(result.replans)}: {result.replans[-1].line()}")
+        print(f"  views (captures included)         {result.n_views} ({result.n_views - len(left)} captured, "
+              f"{len(left)} to capture: {_views_listed(left)})")
         print(f"  path length                       {result.path_length / session.scene.scan_scale:.3f} m "
               f"(world frame)")
         timings = result.timings

@@ -64,8 +64,9 @@ class Request:
 
     def describe(self) -> str:
         if self.view is None:
-            return ("every planned view is captured: `tpvp session export` writes today's model" if self.role == "export"
-                    else "the warm-up is done: run `tpvp session plan`")
+            return {"export": "every planned view is captured: `tpvp session export` writes today's model",
+                    "replan": "planned views were captured (selection.replan_after): run `tpvp session plan` to "
+                              "re-plan the rest from them"}.get(self.role, "the warm-up is done: run `tpvp session plan`")
         fmt = lambda v: "(" + ", ".join(f"{x:.4f}" for x in v) + ")"  # noqa: E731
         return (f"next: capture view {self.view} ({self.role}) at {fmt(self.position)} looking at "
                 f"{fmt(self.look_at)}, quaternion xyzw {fmt(self.quaternion)} (world frame, m)")
@@ -219,6 +220,10 @@ class Session:
             return Request(None, role="plan")
         captured = {c["view"] for c in self.captures}
         left = [v for v in plan["planned_views"] if v not in captured]
+        since = done - plan.get("views_so_far", done)  # captures since the plan (re-planned after K of them)
+        every = plan.get("replan_after", 0)
+        if every and since and (since >= every or not left):
+            return Request(None, role="replan")
         if not left:
             return Request(None, role="export")
         number = len(plan["planned_views"]) - len(left) + 1

@@ -8,7 +8,10 @@
   reconstruction, and the warm-up NBV (the configured method, free space carved along the rays)
   asks for the next view until the warm-up is done;
 * ``plan`` runs registration, inflation, visibility, selection and the exact path on what was
-  captured, and writes the plan as ``tpvp plan`` does (``plan/``); the planned views are asked next;
+  captured, and writes the plan as ``tpvp plan`` does (``plan/``, with ``prediction.npz``: what
+  the plan predicts its views see); the planned views are asked next. Run again after planned
+  views were captured (asked for every ``selection.replan_after`` views), it re-plans the rest from
+  the captures (:func:`tpvp.pipeline.replan.replan`), as the simulator does;
 * ``export`` writes today's fused model (every capture's voxel centres, world frame).
 
 The world frame is the previous model's own (metres after ``--units``). With the same captures,
@@ -18,15 +21,24 @@ the plan equals the simulator's plan of the pair with ``scene.frame = previous``
 
 from __future__ import annotations
 
+from dataclasses import replace
+from pathlib import Path
+
 import numpy as np
 
 from tpvp.config import PlantConfig, with_overrides
 from tpvp.errors import ConfigError
+from tpvp.io import atomic_write_bytes
 from tpvp.nbv.warm_up import start_nbv
-from tpvp.pipeline.plant import Known, plan, transfer
+from tpvp.pipeline.plant import Known, plan, planning_surface, transfer
+from tpvp.pipeline.replan import Prediction, Replan, prediction_of, replan
 from tpvp.scene import voxels
 from tpvp.scene.simulator import planning_frame
 from tpvp.session.folder import KINDS, Request, Session
+
+
+#: What the last plan predicts its views see (:class:`~tpvp.pipeline.replan.Prediction`), beside it.
+PREDICTION = Path("plan") / "prediction.npz"
 
 
 class PlantSession(Session):
@@ -99,16 +111,33 @@ class PlantSession(Session):
         """Plan on the captures (``overrides``: configuration keys for this plan, e.g. the
         coverage target): writes ``plan/`` as ``tpvp plan`` writes its folder (the world frame is
         the scan frame) and returns the :class:`~tpvp.pipeline.plant.CaseResult` (its
-        coverages are NaN: there is no ground truth)."""
+        coverages are NaN: there is no ground truth). After captures of a plan's views, the rest
+        is re-planned from them (the result's ``replans`` end with this one)."""
         self.check_captured()
         from tpvp.pipeline.outputs import write_plan_outputs  # matplotlib, pandas: only a plan writes figures
         config = with_overrides(self.config, overrides or {})
-        result = plan(self.scene, config, transfer(self.scene, config, self.nbv(), progress), progress)
-        self.commit_plan(lambda folder: write_plan_outputs(folder, self.scene, result, config,
-                                                           name=self.folder.name),
-                         {"planned_views": [int(v) for v in result.planned_views],
-                          "executed_views": [int(v) for v in result.executed_views],
-                          "path_length_planning_m": result.path_length})
+        last, captured, nbv = self.state.get("plan"), len(self.captures), self.nbv()
+        predicted = self.folder / PREDICTION
+        if last and captured > last.get("views_so_far", captured) and predicted.is_file():
+            result, prediction, step = replan(self.scene, config, nbv, last["warm_up"], last["planned_views"],
+                                              Prediction.from_bytes(predicted.read_bytes()), progress)
+            result = replace(result, replans=(*(Replan(**row) for row in last.get("replans", [])), step))
+        else:
+            transferred = transfer(self.scene, config, nbv, progress)
+            surface = planning_surface(self.scene, config, transferred, progress)
+            result = plan(self.scene, config, transferred, progress, surface)
+            prediction = prediction_of(surface, captured)
+
+        def write(folder):
+            write_plan_outputs(folder, self.scene, result, config, name=self.folder.name)
+            atomic_write_bytes(folder / PREDICTION.name, prediction.to_bytes())
+
+        self.commit_plan(write, {"planned_views": [int(v) for v in result.planned_views],
+                                 "executed_views": [int(v) for v in result.executed_views],
+                                 "path_length_planning_m": result.path_length,
+                                 "warm_up": len(result.executed_views), "views_so_far": captured,
+                                 "replan_after": config.selection.replan_after,
+                                 "replans": [step.row() for step in result.replans]})
         return result
 
 

@@ -156,10 +156,17 @@ def plot_season(path, per_session: pd.DataFrame, title: str = ""):
     per arm and view space in each panel (:data:`SEASON_PANELS`)."""
     fig, axes = plt.subplots(1, len(SEASON_PANELS), figsize=(4 * len(SEASON_PANELS), 3.6))
     styles = {"truth": ("tab:blue", "o-"), "own": ("tab:red", "s--")}
+    keys = [k for k in ("view_space", "replan_after") if k in per_session]
     for ax, (column, label) in zip(axes, SEASON_PANELS):
-        for (space, arm), rows in per_session.groupby(["view_space", "arm"], sort=False):
+        for (arm, *key), rows in per_session.groupby(["arm", *keys], sort=False):
             colour, marker = styles.get(arm, ("tab:grey", "^:"))
-            ax.plot(rows["session"], rows[f"{column}_mean"], marker, color=colour, label=f"{arm} ({space})")
+            what = dict(zip(keys, key))
+            replanned = what.get("replan_after", 0)
+            if replanned:  # re-planned seasons: lighter, dotted
+                marker = marker[0] + ":"
+            ax.plot(rows["session"], rows[f"{column}_mean"], marker, color=colour, alpha=0.6 if replanned else 1.0,
+                    label=f"{arm} ({what.get('view_space', '')}" + (f", re-plan every {replanned}" if replanned else "")
+                          + ")")
         ax.set_xlabel("session")
         ax.xaxis.set_major_locator(MaxNLocator(integer=True))
         ax.set_ylabel(label)
@@ -168,3 +175,39 @@ def plot_season(path, per_session: pd.DataFrame, title: str = ""):
     fig.suptitle(title or "A season: each session planned from the truth or from its own last reconstruction")
     fig.tight_layout()
     return _save(fig, path, vector=True)
+
+
+_MISSED = (("unseeable", "whitesmoke", "no candidate view sees it"), ("seen", "lightgrey", "seen"),
+           ("missed_in_prior", "tab:red", "missed, the prior held it"),
+           ("missed_not_in_prior", "tab:orange", "missed, the prior held nothing near"))
+
+
+def plot_season_sessions(path, sessions, title: str = ""):
+    """One plant's season, one column per session (side view, planning frame): above, the prior
+    the session planned from (registered) over today's plant; below, today's plant by what became
+    of it (``sessions``: (label, :meth:`tpvp.experiments.season.SeasonSession.missed`, registered
+    prior) triples)."""
+    fig, axes = plt.subplots(2, len(sessions), figsize=(3.2 * len(sessions), 6.4), squeeze=False)
+    for column, (label, missed, prior) in enumerate(sessions):
+        top, bottom = axes[0, column], axes[1, column]
+        today = np.concatenate([missed[k] for k, _, _ in _MISSED])
+        (shown,) = _subsample(today, limit=20000)
+        top.scatter(shown[:, 0], shown[:, 2], s=0.3, color="lightgrey", label="today's plant")
+        if prior is not None and len(prior):
+            (shown,) = _subsample(prior, limit=20000)
+            top.scatter(shown[:, 0], shown[:, 2], s=0.3, color="tab:blue", alpha=0.5, label="prior (registered)")
+        top.set_title(label, fontsize=9)
+        for key, colour, text in _MISSED:
+            (points,) = _subsample(missed[key], limit=20000)
+            size = 2.0 if key.startswith("missed") else 0.3
+            bottom.scatter(points[:, 0], points[:, 2], s=size, color=colour,
+                           label=f"{text} ({len(missed[key]):,})")
+        bottom.legend(fontsize=6, markerscale=4, loc="upper right")
+        for ax in (top, bottom):
+            ax.set_aspect("equal")
+            ax.set_xticks([])
+            ax.set_yticks([])
+    axes[0, 0].legend(fontsize=6, markerscale=8, loc="upper right")
+    fig.suptitle(title or "A season session by session: what the prior held, what the plan missed")
+    fig.tight_layout()
+    return _save(fig, path)
