@@ -23,7 +23,8 @@ def test_there_is_a_notebook_per_experiment():
     names = [p.stem for p in NOTEBOOKS]
     assert names == ["01_getting_started", "02_table1_coverage_effort", "03_table2_plant_complexity",
                      "04_ablations_tables3_4", "05_greenhouse_rows_tables5_6", "06_pose_noise_table7",
-                     "07_planning_time", "08_learned_baselines", "09_prepare_datasets", "10_real_session"]
+                     "07_planning_time", "08_learned_baselines", "09_prepare_datasets", "10_real_session",
+                     "11_season"]
 
 
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=[p.stem for p in NOTEBOOKS])

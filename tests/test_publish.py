@@ -2,6 +2,7 @@
 
 import json
 import os
+import signal
 import subprocess
 import sys
 import time
@@ -154,7 +155,17 @@ def test_two_processes_on_one_output(tmp_path):
     assert summary["views"] == 32 and sorted(listed) == sorted(p.name for p in out.iterdir() if p.name != RUN_MARKER)
 
 
+@pytest.fixture
+def ctrl_c_raises():
+    """Python's own Ctrl-C handler for the test, whatever the run inherited: a run started in the
+    background of a shell ignores SIGINT, and would ignore the injected interrupt too."""
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, previous)
+
+
 @pytest.mark.parametrize("step", [1, 3, 5])
+@pytest.mark.usefixtures("ctrl_c_raises")
 def test_cli_interrupted_at_a_step_says_truthfully_what_happened(tmp_path, capsys, step):
     out = tmp_path / "render"
     with faults.inject("interrupt", step):

@@ -109,7 +109,7 @@ def test_site_pages_load_with_their_figures_links_and_3d_views_offline(tmp_path,
     summary = build_site(executed_notebooks, tmp_path / "site", progress=False)
     site = Path(summary["destination"])
     tutorials = {stem for stem, _ in summary["notebooks"]}
-    assert len(tutorials) == 10 and all((site / f"{stem}.html").is_file() for stem in tutorials)
+    assert len(tutorials) == 11 and all((site / f"{stem}.html").is_file() for stem in tutorials)
     pages = sorted(p.relative_to(site).as_posix() for p in site.rglob("*.html")
                    if "assets" not in p.relative_to(site).parts)
     assert "index.html" in pages

@@ -381,8 +381,8 @@ def _row_series(case: RowSeasonCase, case_config, cache_dir=None) -> _RowSeries:
 
 def _row_arm(name: str):
     def run(series: _RowSeries, config):
-        return [dict(session.row) for session in row_season_sessions(series.scans, config, (name,),
-                                                                     cache_dir=series.cache_dir)]
+        return [{k: v for k, v in session.row.items() if k != "arm"}  # the runner names it ("method")
+                for session in row_season_sessions(series.scans, config, (name,), cache_dir=series.cache_dir)]
     return run
 
 

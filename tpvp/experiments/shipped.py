@@ -45,7 +45,7 @@ class Protocol:
     """What one notebook's tables are made of: the ``setting``'s full cases (rows: of
     ``references``; ``first_case_only`` for the timing of one case) and ``methods``."""
 
-    setting: str  # "plants", "rows" or "season"
+    setting: str  # "plants", "rows", "season" (plants) or "row_season"
     methods: tuple
     references: tuple = ("handheld",)
     first_case_only: bool = False
@@ -56,6 +56,8 @@ class Protocol:
             return plants.default_cases(quick=False)
         if self.setting == "season":
             return season.season_cases()
+        if self.setting == "row_season":
+            return season.row_season_cases()
         cases = rows.default_row_cases(quick=False, references=self.references)
         return cases[:1] if self.first_case_only else cases
 
@@ -67,6 +69,9 @@ class Protocol:
         if self.setting == "season":
             return season.run_season_experiments(self.cases(), self.methods, cache_dir=cache_dir, workers=self.workers,
                                                  progress=progress)
+        if self.setting == "row_season":
+            return season.run_row_season_experiments(self.cases(), self.methods, make_config("row"), cache_dir=cache_dir,
+                                                     workers=self.workers, progress=progress)
         return rows.run_row_experiments(self.cases(), list(self.methods), make_config("row"), cache_dir=cache_dir,
                                         workers=self.workers, progress=progress)
 
@@ -74,9 +79,10 @@ class Protocol:
         """The protocol's rows from ``cache_dir`` when every (case, method) is there, else None."""
         if self.setting == "plants":
             return plants.cached_experiments(self.cases(), list(self.methods), cache_dir=cache_dir)
-        if self.setting == "season":
-            return cached_experiments(season.SEASON_EXPERIMENTS, self.cases(), list(self.methods),
-                                      make_config("plant"), cache_dir)
+        if self.setting in ("season", "row_season"):
+            experiment, setting = ((season.SEASON_EXPERIMENTS, "plant") if self.setting == "season"
+                                   else (season.ROW_SEASON_EXPERIMENTS, "row"))
+            return cached_experiments(experiment, self.cases(), list(self.methods), make_config(setting), cache_dir)
         return rows.cached_row_experiments(self.cases(), list(self.methods), make_config("row"), cache_dir=cache_dir)
 
 
@@ -89,6 +95,8 @@ PROTOCOLS = {
     "tables5_6": Protocol("rows", tuple(rows.ALL_METHODS), references=REFERENCES),
     "table7": Protocol("rows", ("pose-noise",)),
     "planning_time": Protocol("rows", ("ours", "blockwise-nbv"), first_case_only=True, workers=1),
+    "season": Protocol("season", season.ARMS),
+    "row_season": Protocol("row_season", season.ARMS),
 }
 
 

@@ -209,6 +209,18 @@ def arm_step() -> None:
     _step.update(armed=True, published=None, signals=[])
 
 
+@contextlib.contextmanager
+def armed_step():
+    """:func:`arm_step` for the block; disarmed after it, published or not: a step that ends
+    without a publish (refused, nothing to write) must not arm the next command's publish in the
+    same process (the tests run many commands in one)."""
+    arm_step()
+    try:
+        yield
+    finally:
+        _step["armed"] = False
+
+
 def step_published() -> Path | None:
     """The destination the armed step published (None before its commit, or when none is armed)."""
     return _step["published"]

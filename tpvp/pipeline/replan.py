@@ -114,26 +114,31 @@ def disagreement(prediction: Prediction, views, observations, captured) -> tuple
     of ``captured`` (every capture so far) near them. Both at the prediction's resolution."""
     resolution = prediction.resolution
     predicted = voxels.voxel_keys(prediction.centres, resolution)
-    seen = np.concatenate([np.asarray(o, dtype=np.float64).reshape(-1, 3) for o in observations] or [np.zeros((0, 3))])
-    seen_keys = voxels.unique_keys(voxels.voxel_keys(seen, resolution)) if len(seen) else np.zeros((0, 3), np.int64)
-    unexpected = int((~_near(predicted, seen_keys)).sum())
+    seen = _keys_of(list(observations), resolution)
+    unexpected = int((~_near(predicted, seen)).sum())
     expected = np.unique(prediction.visibility[list(views)].indices) if len(views) else np.zeros(0, np.int64)
-    contradicted = int((~_near(_captured_keys(captured, resolution), predicted[expected])).sum())
-    return unexpected, contradicted
+    return unexpected, int(_unconfirmed(predicted[expected], captured, resolution).sum())
 
 
-def _captured_keys(captured, resolution: float) -> np.ndarray:
-    points = np.asarray(captured, dtype=np.float64).reshape(-1, 3)
+def _keys_of(points, resolution: float) -> np.ndarray:
+    """The distinct voxel keys of a list of point arrays (or one array)."""
+    if isinstance(points, list):
+        points = np.concatenate([np.asarray(p, dtype=np.float64).reshape(-1, 3) for p in points] or [np.zeros((0, 3))])
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     return voxels.unique_keys(voxels.voxel_keys(points, resolution)) if len(points) else np.zeros((0, 3), np.int64)
+
+
+def _unconfirmed(keys: np.ndarray, captured, resolution: float) -> np.ndarray:
+    """Which predicted voxel ``keys`` have no point of ``captured`` near them."""
+    return ~_near(_keys_of(captured, resolution), keys)
 
 
 def contradicted_voxels(grid, visibility, executed, captured) -> np.ndarray:
     """Mask of the planning voxels some executed view should see (``visibility``) with no captured
     point near them: the captures contradict them."""
-    expected = np.zeros(grid.size, dtype=bool)
-    expected[np.unique(sparse.csr_matrix(visibility)[list(executed)].indices)] = True
+    expected = np.unique(sparse.csr_matrix(visibility)[list(executed)].indices)
     mask = np.zeros(grid.size, dtype=bool)
-    mask[expected] = ~_near(_captured_keys(captured, grid.resolution), grid.keys[expected])
+    mask[expected] = _unconfirmed(grid.keys[expected], captured, grid.resolution)
     return mask
 
 

@@ -19,7 +19,7 @@ from tpvp.cli_common import COVERAGE_TARGET_HELP, case_options, print_warnings, 
 from tpvp.config import parse_overrides
 from tpvp.errors import InputFileError, TpvpError
 from tpvp.io import read_point_cloud
-from tpvp.io.publish import RunInterrupted, arm_step, late_signals
+from tpvp.io.publish import RunInterrupted, armed_step, late_signals
 from tpvp.io.units import plant_size_warning
 from tpvp.scene.boxes import ROOMS
 from tpvp.scene.simulator import NATIVE_RADIUS
@@ -110,9 +110,8 @@ def _held(args):
     def waiting():
         print(f"tpvp session {args.step}: {args.folder} is being written by another run; waiting for it (at most "
               f"{args.wait:g} s)", file=sys.stderr, flush=True)
-    arm_step()
     try:
-        with Session.held(args.folder, args.wait, waiting) as session:
+        with armed_step(), Session.held(args.folder, args.wait, waiting) as session:
             yield session
     except KeyboardInterrupt as exc:
         if isinstance(exc, RunInterrupted):
@@ -139,8 +138,8 @@ def _session_start(args) -> int:
                                        drop_invalid=args.drop_invalid)
     if config.setting == "plant":
         print_warnings([w for w in [plant_size_warning(previous, units, str(args.previous))] if w])
-    arm_step()
-    session = Session.start(args.output, previous, config, str(args.previous), units=units.used, wait=args.wait)
+    with armed_step():
+        session = Session.start(args.output, previous, config, str(args.previous), units=units.used, wait=args.wait)
     positions, _ = session.views()
     where = (f"{config.view_space}, the room's frame" if session.kind == "row" else
              f"{config.view_space}, {session.config.scene.radius or NATIVE_RADIUS:g} m around the plant")
@@ -224,8 +223,7 @@ def _session_export(args) -> int:
 
 def _session_check(args) -> int:
     """List the folder's problems; with ``--repair``, say what will be done, do it, list what is left."""
-    arm_step()
-    with Session.locked(args.folder, args.wait):
+    with armed_step(), Session.locked(args.folder, args.wait):
         problems = Session.problems(args.folder)
         for problem in problems:
             print(f"problem: {problem.line(args.folder)}")

@@ -152,26 +152,32 @@ SEASON_PANELS = (("coverage", "true coverage (%)"), ("views", "views"), ("chamfe
 
 
 def plot_season(path, per_session: pd.DataFrame, title: str = ""):
-    """A season session by session (``tpvp.experiments.season.tables``' per-session means): one line
-    per arm and view space in each panel (:data:`SEASON_PANELS`)."""
-    fig, axes = plt.subplots(1, len(SEASON_PANELS), figsize=(4 * len(SEASON_PANELS), 3.6))
-    styles = {"truth": ("tab:blue", "o-"), "own": ("tab:red", "s--")}
-    keys = [k for k in ("view_space", "replan_after") if k in per_session]
-    for ax, (column, label) in zip(axes, SEASON_PANELS):
-        for (arm, *key), rows in per_session.groupby(["arm", *keys], sort=False):
-            colour, marker = styles.get(arm, ("tab:grey", "^:"))
-            what = dict(zip(keys, key))
-            replanned = what.get("replan_after", 0)
-            if replanned:  # re-planned seasons: lighter, dotted
-                marker = marker[0] + ":"
-            ax.plot(rows["session"], rows[f"{column}_mean"], marker, color=colour, alpha=0.6 if replanned else 1.0,
-                    label=f"{arm} ({what.get('view_space', '')}" + (f", re-plan every {replanned}" if replanned else "")
-                          + ")")
-        ax.set_xlabel("session")
-        ax.xaxis.set_major_locator(MaxNLocator(integer=True))
-        ax.set_ylabel(label)
-        ax.grid(alpha=0.3)
-    axes[0].legend(fontsize=8)
+    """A season session by session (``tpvp.experiments.season.tables``' per-session means): one row
+    of panels (:data:`SEASON_PANELS`) per view space or room, one line per arm, dotted where the
+    plans were re-planned from their captures."""
+    spaces = list(dict.fromkeys(per_session["view_space"])) if "view_space" in per_session else [None]
+    fig, axes = plt.subplots(len(spaces), len(SEASON_PANELS), figsize=(4 * len(SEASON_PANELS), 3.4 * len(spaces)),
+                             squeeze=False)
+    styles = {"truth": ("tab:blue", "o"), "own": ("tab:red", "s")}
+    for row, space in zip(axes, spaces):
+        frame = per_session if space is None else per_session[per_session["view_space"] == space]
+        replans = frame["replan_after"] if "replan_after" in frame else pd.Series(0, index=frame.index)
+        for (arm, replanned), rows in frame.assign(replan_after=replans).groupby(["arm", "replan_after"], sort=False):
+            colour, marker = styles.get(arm, ("tab:grey", "^"))
+            if arm == "none" and replanned:  # the none arm makes no plan: the same line twice
+                continue
+            label = arm + (f", re-planned every {replanned}" if replanned else "")
+            for ax, (column, _) in zip(row, SEASON_PANELS):
+                ax.plot(rows["session"], rows[f"{column}_mean"], marker + (":" if replanned else "-"), color=colour,
+                        alpha=0.55 if replanned else 1.0, label=label)
+        for ax, (_, label) in zip(row, SEASON_PANELS):
+            ax.set_xlabel("session")
+            ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+            ax.set_ylabel(label)
+            ax.grid(alpha=0.3)
+        if space is not None:
+            row[0].set_title(space, loc="left", fontsize=10, fontweight="bold")
+        row[0].legend(fontsize=7)
     fig.suptitle(title or "A season: each session planned from the truth or from its own last reconstruction")
     fig.tight_layout()
     return _save(fig, path, vector=True)
