@@ -1,0 +1,107 @@
+"""A plan in a robot's frame: ``plan.csv`` read back, moved by a rigid base-from-scan transform,
+and written as MoveIt pose goals (YAML).
+
+The plan's quaternion turns camera axes (OpenCV: x right, y down, z forward) into the plan's frame;
+moved into the robot's base frame it turns them into the base frame. Which link carries the
+camera, and its offset, is the robot's business: the goals are the camera's poses.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import yaml
+
+from tpvp.errors import InputFileError
+from tpvp.io.plan import CAMERA_AXES
+from tpvp.sensor.camera import rotation_to_quaternion
+
+PLAN_COLUMNS = ("step", "role", "x", "y", "z", "look_x", "look_y", "look_z", "qx", "qy", "qz", "qw")
+#: How far a transform's rotation may be from a proper rotation (orthonormal, determinant +1).
+RIGID_TOLERANCE = 1e-6
+
+
+def read_plan(path) -> pd.DataFrame:
+    """A plan written by ``tpvp plan`` / ``tpvp session plan`` (``plan.csv``, or the folder holding
+    it), its views in execution order; one clear error for anything else."""
+    path = Path(path)
+    if path.is_dir():
+        path = path / "plan.csv"
+    if not path.is_file():
+        raise InputFileError(f"{path}: no such plan (a plan.csv written by tpvp plan or tpvp session plan)")
+    try:
+        table = pd.read_csv(path, comment="#")
+    except (OSError, ValueError, pd.errors.ParserError) as exc:
+        raise InputFileError(f"{path}: not a readable plan ({exc})") from None
+    missing = [c for c in PLAN_COLUMNS if c not in table.columns]
+    if missing:
+        raise InputFileError(f"{path}: not a tpvp plan: missing columns {', '.join(missing)}")
+    numbers = table[[c for c in PLAN_COLUMNS if c != "role"]]
+    if table.empty or not np.isfinite(numbers.to_numpy(dtype=np.float64)).all():
+        raise InputFileError(f"{path}: the plan has no views or a value that is not a finite number")
+    return table
+
+
+def read_transform(path) -> np.ndarray:
+    """A rigid 4x4 transform from a JSON or YAML file: the matrix itself (4 rows of 4), or a
+    mapping with it under ``matrix``; one clear error naming the file when it is not rigid."""
+    path = Path(path)
+    try:
+        data = yaml.safe_load(path.read_text())  # JSON is YAML
+    except OSError as exc:
+        raise InputFileError(f"{path}: cannot read the transform ({exc.strerror or exc})") from None
+    except yaml.YAMLError as exc:
+        raise InputFileError(f"{path}: not JSON or YAML ({str(exc).splitlines()[0]})") from None
+    if isinstance(data, dict):
+        data = data.get("matrix")
+    try:
+        matrix = np.asarray(data, dtype=np.float64)
+    except (TypeError, ValueError):
+        matrix = np.zeros(0)
+    if matrix.shape != (4, 4) or not np.isfinite(matrix).all():
+        raise InputFileError(f"{path}: a transform is a 4x4 matrix of numbers (or a mapping with it under "
+                             f"'matrix'), got {json.dumps(data)[:80]}")
+    rotation = matrix[:3, :3]
+    error = max(np.abs(rotation @ rotation.T - np.eye(3)).max(), abs(np.linalg.det(rotation) - 1.0),
+                np.abs(matrix[3] - [0, 0, 0, 1]).max())
+    if error > RIGID_TOLERANCE:
+        raise InputFileError(f"{path}: not a rigid transform (its rotation is off a proper rotation by {error:.3g}, "
+                             f"or its last row is not 0 0 0 1): a scaled or sheared matrix would move the views "
+                             f"off their plant; give the base-from-scan pose in metres")
+    return matrix
+
+
+def quaternion_to_rotation(q) -> np.ndarray:
+    """The rotation matrix of a unit quaternion (x, y, z, w)."""
+    x, y, z, w = np.asarray(q, dtype=np.float64) / np.linalg.norm(q)
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+
+
+def moved_plan(table: pd.DataFrame, matrix: np.ndarray) -> pd.DataFrame:
+    """The plan's views moved by the rigid ``matrix`` (positions, look-ats and orientations)."""
+    rotation, translation = matrix[:3, :3], matrix[:3, 3]
+    moved = table.copy()
+    for columns in (["x", "y", "z"], ["look_x", "look_y", "look_z"]):
+        moved[columns] = table[columns].to_numpy(dtype=np.float64) @ rotation.T + translation
+    quaternions = [rotation_to_quaternion(rotation @ quaternion_to_rotation(q))
+                   for q in table[["qx", "qy", "qz", "qw"]].to_numpy(dtype=np.float64)]
+    moved[["qx", "qy", "qz", "qw"]] = np.asarray(quaternions).reshape(-1, 4)
+    return moved
+
+
+def moveit_goals(table: pd.DataFrame, frame: str, matrix: np.ndarray, source: str) -> str:
+    """MoveIt pose goals (YAML): the camera pose of every view in execution order in ``frame``,
+    the transform used and the camera axes."""
+    goals = [{"step": int(row.step), "role": str(row.role),
+              "position": {"x": float(row.x), "y": float(row.y), "z": float(row.z)},
+              "orientation": {"x": float(row.qx), "y": float(row.qy), "z": float(row.qz), "w": float(row.qw)}}
+             for row in moved_plan(table, matrix).itertuples()]
+    document = {"frame_id": frame, "units": "m", "camera_axes": CAMERA_AXES, "source": source,
+                "base_from_scan": matrix.tolist(), "pose_goals": goals}
+    return ("# tpvp plan as MoveIt pose goals: the camera's pose at each view, in execution order\n"
+            + yaml.safe_dump(document, sort_keys=False, default_flow_style=None, width=120))
