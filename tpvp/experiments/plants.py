@@ -138,9 +138,7 @@ def dataset_instances(folder, plants=None, pairs=None, paper_subset: bool = Fals
     row numbers; ``paper_subset``: plants 1-3 of each species, their first pair)."""
     folder = Path(folder)
     table_path = folder / "pairs.csv"
-    table = dataset_table(folder)
-    if plants:
-        table = table[table["plant"].isin(list(plants))]
+    table = dataset_table(folder, plants)
     if pairs:
         table = table.loc[[i for i in pairs if i in table.index]]
     if paper_subset:

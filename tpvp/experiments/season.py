@@ -66,12 +66,8 @@ def reconstruction(scene, views) -> np.ndarray:
 def held_near(points: np.ndarray, prior: np.ndarray, voxel: float) -> np.ndarray:
     """Which ``points`` have a point of ``prior`` in their voxel or a voxel next to it
     (26-neighbourhood, ``voxel`` metres)."""
-    held = voxels.encode_keys(voxels.voxelise(prior, voxel))
-    keys = voxels.voxel_keys(points, voxel)
-    found = np.zeros(len(points), bool)
-    for offset in np.stack(np.meshgrid(*[np.arange(-1, 2)] * 3, indexing="ij"), axis=-1).reshape(-1, 3):
-        found |= np.isin(voxels.encode_keys(keys + offset), held)
-    return found
+    near = voxels.dilate_keys(voxels.voxelise(prior, voxel), np.sqrt(3))  # the voxel and its 26 neighbours
+    return voxels.contains_keys(near, voxels.voxel_keys(points, voxel))
 
 
 def prior_missing(scene, warped: np.ndarray, voxel: float) -> float:
@@ -125,42 +121,52 @@ class SeasonSession:
                 "missed_not_in_prior": centres[missed & ~held], "unseeable": centres[~seeable]}
 
 
-def season_sessions(series, config: PlantConfig = PlantConfig(), arms=ARMS, name: str = "plant"):
-    """Every session (2 .. n: the day planned) of every arm, in order, as :class:`SeasonSession`.
-    ``series``: the plant's scans in order (points, metres), day 1 first."""
+def chained_sessions(series, arms, name: str, session):
+    """Every session (2 .. n: the day planned) of every arm, in order: ``session(prior, today,
+    day, arm)`` plans and measures one, returning (its :class:`SeasonSession`, what it saw of
+    today: the next ``own`` prior). ``truth`` and ``none`` plan from the previous day's scan,
+    ``own`` from what its previous session saw; session 2 starts every arm from day 1's scan."""
     series = [np.asarray(points, dtype=np.float64) for points in series]
     if len(series) < 2:
         raise ConfigError(f"{name}: a season needs at least 2 scans, got {len(series)}")
     unknown = [arm for arm in arms if arm not in ARMS]
     if unknown:
         raise ConfigError(f"unknown season arm {unknown[0]!r}; choose from {', '.join(ARMS)}")
-    own = series[0]  # session 1 starts from day 1's full scan
+    own = series[0]
     for day in range(1, len(series)):
         next_own = own
         for arm in arms:
-            prior = series[day - 1] if arm in ("truth", "none") else own
-            scene = build_scene(prior, series[day], config,
-                                names=(f"{name} day {day} ({arm} prior)", f"{name} day {day + 1}"))
-            per_mm = 1e3 / scene.scan_scale  # planning-frame metres -> the scans' millimetres
-            warped = None
-            if arm == "none":
-                views, coverage, path_length, order = _without_prior(scene, config)
-                registration = missing = float("nan")
-            else:
-                result = run_case(scene, config)
-                views, coverage, path_length, order = result.n_views, result.coverage, result.path_length, result.order
-                registration = per_mm * result.chamfer_after
-                warped = result.clouds["warped"]
-                missing = prior_missing(scene, warped, config.gt_resolution)
-            fused = reconstruction(scene, order)
-            row = {"session": day + 1, "arm": arm, "views": views, "coverage": coverage,
-                   "path_length_m": path_length, "chamfer_fused_mm": per_mm * chamfer_distance(fused, scene.current),
-                   "registration_chamfer_mm": registration, "prior_missing": missing,
-                   "prior_points": 0 if arm == "none" else len(prior)}
-            yield SeasonSession(scene, prior, list(order), fused, warped, row)
+            done, seen = session(own if arm == "own" else series[day - 1], series[day], day, arm)
+            yield done
             if arm == "own":
-                next_own = scan_points(scene.plant_from_scan, fused)
+                next_own = seen
         own = next_own
+
+
+def season_sessions(series, config: PlantConfig = PlantConfig(), arms=ARMS, name: str = "plant"):
+    """A plant's sessions per arm (:func:`chained_sessions`). ``series``: its scans in order
+    (points, metres), day 1 first."""
+    def session(prior, today, day, arm):
+        scene = build_scene(prior, today, config, names=(f"{name} day {day} ({arm} prior)", f"{name} day {day + 1}"))
+        per_mm = 1e3 / scene.scan_scale  # planning-frame metres -> the scans' millimetres
+        warped = None
+        if arm == "none":
+            views, coverage, path_length, order = _without_prior(scene, config)
+            registration = missing = float("nan")
+        else:
+            result = run_case(scene, config)
+            views, coverage, path_length, order = result.n_views, result.coverage, result.path_length, result.order
+            registration = per_mm * result.chamfer_after
+            warped = result.clouds["warped"]
+            missing = prior_missing(scene, warped, config.gt_resolution)
+        fused = reconstruction(scene, order)
+        row = {"session": day + 1, "arm": arm, "views": views, "coverage": coverage,
+               "path_length_m": path_length, "chamfer_fused_mm": per_mm * chamfer_distance(fused, scene.current),
+               "registration_chamfer_mm": registration, "prior_missing": missing,
+               "prior_points": 0 if arm == "none" else len(prior)}
+        return SeasonSession(scene, prior, list(order), fused, warped, row), scan_points(scene.plant_from_scan, fused)
+
+    return chained_sessions(series, arms, name, session)
 
 
 def run_season(series, config: PlantConfig = PlantConfig(), arms=ARMS, name: str = "plant") -> pd.DataFrame:
@@ -236,9 +242,14 @@ def _series(case: SeasonCase, case_config, cache_dir=None) -> list:
     return [sample.points for sample in generate_growth_series(case.species, case.seed, case.sessions, case.days)]
 
 
+def _arm_rows(sessions) -> list[dict]:
+    """Each session's row without its arm (the runner names it: ``method``)."""
+    return [{k: v for k, v in session.row.items() if k != "arm"} for session in sessions]
+
+
 def _arm(name: str):
     def run(series, config):
-        return run_season(series, config, arms=(name,)).drop(columns=["arm"]).to_dict("records")
+        return _arm_rows(season_sessions(series, config, (name,)))
     return run
 
 
@@ -253,7 +264,6 @@ def tables(raw: pd.DataFrame) -> dict:
     coverage of any session, and how far the fused model's Chamfer distance drifted (last session
     minus the first)."""
     rows = raw.rename(columns={"method": "arm"})
-    rows = rows.assign(replan_after=rows["replan_after"] if "replan_after" in rows else 0)
     per_session = mean_std(rows, ["view_space", "replan_after", "session", "arm"],
                            columns=("views", "coverage", "path_length_m", "chamfer_fused_mm",
                                     "registration_chamfer_mm", "prior_missing"))
@@ -301,46 +311,38 @@ ROW_SEASON_ARMS = Registry("row season arm")
 
 
 def row_season_sessions(series, config, arms=ARMS, name: str = "row", cache_dir=None):
-    """A row's sessions (2 .. n) per arm, as :func:`season_sessions` for a plant: ``series``: the
-    row's scans in order (room frame, metres); the ``own`` prior is what the previous session's
-    passive sweep and planned views saw (the observed points of its voxels); ``none`` is the
-    block-wise NBV until :data:`ROW_NONE_TARGET`. ``cache_dir``: the oracles' disk cache."""
-    series = [np.asarray(points, dtype=np.float64) for points in series]
-    if len(series) < 2:
-        raise ConfigError(f"{name}: a season needs at least 2 scans, got {len(series)}")
-    own = series[0]
-    for day in range(1, len(series)):
-        next_own = own
-        for arm in arms:
-            prior = series[day - 1] if arm in ("truth", "none") else own
-            scene = build_row_scene(prior, series[day], config, cache_dir=cache_dir,
-                                    names=(f"{name} day {day} ({arm} prior)", f"{name} day {day + 1}"))
-            warped = None
-            if arm == "none":
-                run = blockwise_nbv(scene.grid, scene.room, ROW_NONE_MAX_VIEWS, config.blockwise, sensor=config.sensor,
-                                    seed=config.seed, progress=False)
-                curve = run.coverage_curve(scene.oracle)
-                reached = np.flatnonzero(curve >= ROW_NONE_TARGET - 1e-12)
-                views = int(reached[0]) if len(reached) else len(run)
-                coverage, path_length = float(curve[views]), run.path_after(views)
-                seen = np.flatnonzero(run.covered_after(views))
-                registration = missing = float("nan")
-            else:
-                result = run_row_case(scene, config)
-                views, coverage, path_length = result.n_views, result.coverage, result.path_length
-                seen = np.union1d(execute(scene, result.positions, result.look_ats), scene.passive_seen)
-                warped = result.transfer.alignment.warped
-                registration = 1e3 * result.transfer.alignment.chamfer_after
-                missing = prior_missing(scene, warped, config.gt_resolution)
-            fused = observed_points(scene.grid, scene.current)[seen]
-            row = {"session": day + 1, "arm": arm, "views": views, "coverage": coverage, "path_length_m": path_length,
-                   "chamfer_fused_mm": 1e3 * chamfer_distance(fused, scene.current),
-                   "registration_chamfer_mm": registration, "prior_missing": missing,
-                   "prior_points": 0 if arm == "none" else len(prior)}
-            yield SeasonSession(scene, prior, [], fused, warped, row)
-            if arm == "own":
-                next_own = fused
-        own = next_own
+    """A row's sessions per arm (:func:`chained_sessions`): ``series``: the row's scans in order
+    (room frame, metres); the ``own`` prior is what the previous session's passive sweep and
+    planned views saw (the observed points of its voxels); ``none`` is the block-wise NBV until
+    :data:`ROW_NONE_TARGET`. ``cache_dir``: the oracles' disk cache."""
+    def session(prior, today, day, arm):
+        scene = build_row_scene(prior, today, config, cache_dir=cache_dir,
+                                names=(f"{name} day {day} ({arm} prior)", f"{name} day {day + 1}"))
+        warped = None
+        if arm == "none":
+            run = blockwise_nbv(scene.grid, scene.room, ROW_NONE_MAX_VIEWS, config.blockwise, sensor=config.sensor,
+                                seed=config.seed, progress=False)
+            curve = run.coverage_curve(scene.oracle)
+            reached = np.flatnonzero(curve >= ROW_NONE_TARGET - 1e-12)
+            views = int(reached[0]) if len(reached) else len(run)
+            coverage, path_length = float(curve[views]), run.path_after(views)
+            seen = np.flatnonzero(run.covered_after(views))
+            registration = missing = float("nan")
+        else:
+            result = run_row_case(scene, config)
+            views, coverage, path_length = result.n_views, result.coverage, result.path_length
+            seen = np.union1d(execute(scene, result.positions, result.look_ats), scene.passive_seen)
+            warped = result.transfer.alignment.warped
+            registration = 1e3 * result.transfer.alignment.chamfer_after
+            missing = prior_missing(scene, warped, config.gt_resolution)
+        fused = observed_points(scene.grid, scene.current)[seen]
+        row = {"session": day + 1, "arm": arm, "views": views, "coverage": coverage, "path_length_m": path_length,
+               "chamfer_fused_mm": 1e3 * chamfer_distance(fused, scene.current),
+               "registration_chamfer_mm": registration, "prior_missing": missing,
+               "prior_points": 0 if arm == "none" else len(prior)}
+        return SeasonSession(scene, prior, [], fused, warped, row), fused
+
+    return chained_sessions(series, arms, name, session)
 
 
 @dataclass(frozen=True)
@@ -381,8 +383,7 @@ def _row_series(case: RowSeasonCase, case_config, cache_dir=None) -> _RowSeries:
 
 def _row_arm(name: str):
     def run(series: _RowSeries, config):
-        return [{k: v for k, v in session.row.items() if k != "arm"}  # the runner names it ("method")
-                for session in row_season_sessions(series.scans, config, (name,), cache_dir=series.cache_dir)]
+        return _arm_rows(row_season_sessions(series.scans, config, (name,), cache_dir=series.cache_dir))
     return run
 
 

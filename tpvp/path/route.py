@@ -20,9 +20,15 @@ def path_through(space, executed, selected, coarse, config):
     stops = [executed[-1], *selected]
     tsp = shortest_open_path(local_path_lengths(space.positions[stops], centre, radius), start=0, config=config.path)
     planned = [int(stops[i]) for i in tsp.order[1:]]
-    warm_up_path = float(np.trace(local_path_lengths(space.positions[executed], centre, radius), offset=1)) \
-        if len(executed) > 1 else 0.0
-    return planned, warm_up_path + tsp.length, tsp, radius
+    return planned, path_along(space.positions[executed], radius) + tsp.length, tsp, radius
+
+
+def path_along(positions, radius: float) -> float:
+    """The length of the path through ``positions`` in their order, around the obstacle sphere of
+    ``radius`` at the origin (0 for fewer than two)."""
+    if len(positions) < 2:
+        return 0.0
+    return float(np.trace(local_path_lengths(positions, np.zeros(3), radius), offset=1))
 
 
 #: How a row's selected views are ordered (``RowConfig.route``): name -> function

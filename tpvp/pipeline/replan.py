@@ -16,18 +16,18 @@ and a real session (:mod:`tpvp.session.plant`) call the same function with the s
 from __future__ import annotations
 
 import io
-import math
 import time
 from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy import sparse
 
-from tpvp.path.local import local_path_lengths, obstacle_radius
+from tpvp.path.local import obstacle_radius
+from tpvp.path.route import path_along
 from tpvp.path.tsp import PathResult
 from tpvp.pipeline.plant import Known, plan, planning_surface, selection_problem, transfer
 from tpvp.scene import voxels
-from tpvp.setcover.methods import Selection
+from tpvp.setcover.methods import Selection, cover_requirement
 
 #: A predicted voxel agrees with the captures when a captured point lies in it or in one of its 6
 #: face neighbours (and a captured voxel with the prediction likewise): the two are quantised apart.
@@ -144,11 +144,8 @@ def contradicted_voxels(grid, visibility, executed, captured) -> np.ndarray:
 
 def _reaches(problem, views) -> tuple[bool, float]:
     """Whether the executed views and ``views`` see the planning target of ``problem`` (as its
-    selection counts it: coverable voxels, or their weights), and the share they see."""
-    matrix = sparse.csr_matrix(problem.visibility)
-    weights = np.ones(matrix.shape[1]) if problem.voxel_weights is None else np.asarray(problem.voxel_weights, float)
-    coverable = np.zeros(matrix.shape[1], dtype=bool)
-    coverable[matrix.indices] = True
+    selection counts it, :func:`~tpvp.setcover.methods.cover_requirement`), and the share they see."""
+    matrix, weights, coverable, required = cover_requirement(problem)
     seen = np.zeros(matrix.shape[1], dtype=bool)
     rows = [*problem.executed, *views]
     if rows:
@@ -157,17 +154,7 @@ def _reaches(problem, views) -> tuple[bool, float]:
     share = covered / total if total else 1.0
     if problem.planning_target >= 1.0:
         return bool(np.all(seen[coverable])), share
-    required = (math.ceil(problem.planning_target * total - 1e-9) if problem.voxel_weights is None
-                else problem.planning_target * total)
     return covered >= required - 1e-9, share
-
-
-def _fixed_path(space, order, coarse) -> float:
-    """The length of the path through ``order`` as it is (the obstacle sphere sized on ``coarse``)."""
-    if len(order) < 2:
-        return 0.0
-    return float(np.trace(local_path_lengths(space.positions[list(order)], np.zeros(3),
-                                             obstacle_radius(coarse, np.zeros(3))), offset=1))
 
 
 def replan(known: Known, config, nbv, warm_up: int, planned, prediction: Prediction, progress=None):
@@ -195,7 +182,8 @@ def replan(known: Known, config, nbv, warm_up: int, planned, prediction: Predict
     problem = selection_problem(known, config, transferred, surface)
     reaches, _ = _reaches(problem, remaining)
     if agree or (reaches and len(remaining) <= len(result.planned_views)):
-        length = _fixed_path(known.view_space, executed + remaining, transferred.coarse)
+        length = path_along(known.view_space.positions[executed + remaining],
+                            obstacle_radius(transferred.coarse, np.zeros(3)))
         kept = Selection(np.sort(np.asarray(remaining, dtype=np.int64)), False,
                          "kept: the remaining plan " + ("agrees with the captures" if agree
                                                         else "still reaches the planning target"), 0.0)

@@ -68,6 +68,19 @@ def set_cover(problem: SelectionProblem, config) -> Selection:
     if problem.planning_target >= 1.0:
         result = solve_set_cover(problem.visibility, executed=problem.executed, config=config.set_cover)
         return Selection(result.selected, result.optimal, result.status, time.perf_counter() - t0, result)
+    matrix, weights, coverable, required = cover_requirement(problem)
+    total = float(weights[coverable].sum())
+    result = partial_set_cover(matrix, required, executed=problem.executed, config=config.set_cover,
+                               weights=problem.voxel_weights)
+    status = (f"{result.status}; {100 * result.covered_weight / total:.2f} % of the coverable planning surface"
+              if total else result.status)
+    return Selection(result.selected, result.optimal, status, time.perf_counter() - t0, result)
+
+
+def cover_requirement(problem: SelectionProblem):
+    """(visibility as csr, voxel weights, coverable voxels, required weight): what a partial cover
+    of ``problem`` must see, as :func:`set_cover` counts it (voxels seen by some view, or their
+    weights; the planning target's share of them, a whole number of voxels when unweighted)."""
     matrix = sparse.csr_matrix(problem.visibility)
     weights = np.ones(matrix.shape[1]) if problem.voxel_weights is None else np.asarray(problem.voxel_weights, float)
     coverable = np.zeros(matrix.shape[1], dtype=bool)
@@ -75,11 +88,7 @@ def set_cover(problem: SelectionProblem, config) -> Selection:
     total = float(weights[coverable].sum())
     required = math.ceil(problem.planning_target * total - 1e-9) if problem.voxel_weights is None \
         else problem.planning_target * total
-    result = partial_set_cover(matrix, required, executed=problem.executed, config=config.set_cover,
-                               weights=problem.voxel_weights)
-    status = (f"{result.status}; {100 * result.covered_weight / total:.2f} % of the coverable planning surface"
-              if total else result.status)
-    return Selection(result.selected, result.optimal, status, time.perf_counter() - t0, result)
+    return matrix, weights, coverable, required
 
 
 def select_views(problem: SelectionProblem, config) -> Selection:
