@@ -12,6 +12,8 @@ import argparse
 import sys
 from pathlib import Path
 
+from data_tools.capture.formats import FORMATS
+from data_tools.capture.fusion import SCALES
 from data_tools.kaggle_download import KAGGLE_DATASET
 from tpvp.errors import install_warning_format, run_command
 from tpvp.errors import TpvpError
@@ -98,6 +100,37 @@ def _prepare_session(args) -> int:
     return 0
 
 
+def _capture_fuse(args) -> int:
+    from data_tools.capture.formats import read_capture
+    from data_tools.capture.fusion import fuse, fusion_config
+    from tpvp.io import write_point_cloud
+
+    if args.output.exists() and not args.force:
+        raise TpvpError(f"{args.output} exists: pass --force to replace it")
+    config = fusion_config(args.scale, voxel_size=args.voxel_size, truncation=args.truncation,
+                           max_depth=args.max_depth, min_confidence=args.min_confidence, support=args.support)
+    capture = read_capture(args.source, args.format, args.depth_scale)
+    print(f"{capture.folder}: {len(capture.frames)} frames ({capture.format}); fusing at {1000 * config.voxel_size:g} mm "
+          f"voxels, truncation {1000 * config.truncation:g} mm, depth up to {config.max_depth:g} m "
+          f"(--scale {args.scale})")
+    points, colours = fuse(capture, config)
+    write_point_cloud(args.output, points, colors=colours)
+    print(f"wrote {args.output}: {len(points):,} surface points with colours (metres, the capture's world frame)")
+    return 0
+
+
+def _capture_standin(args) -> int:
+    from data_tools.capture.standin import plant_scene, row_scene, write_standin
+
+    scene = (plant_scene(args.species, args.seed, args.size, args.frames) if args.scene == "plant"
+             else row_scene(args.room, args.seed))
+    folder = write_standin(args.output, args.format, scene, force=args.force)
+    print(f"wrote a {args.format} capture of a generated {args.species if args.scene == 'plant' else args.room} "
+          f"({len(scene.positions)} frames) and its truth.ply to {folder}; next: python -m data_tools capture fuse "
+          f"{folder} --scale {args.scene} --output cloud.ply")
+    return 0
+
+
 def _cleaning_options(p):
     p.add_argument("--units", default="m", choices=["m", "mm", "auto"],
                    help="units of the scans (default: %(default)s; Polycam exports metres)")
@@ -155,6 +188,39 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--processed", action="store_true",
                    help="write processed models (Processed_3D_Model) instead of raw captures with landmarks")
     p.set_defaults(func=_greenhouse_standin)
+
+    capture = sub.add_parser("capture", help="a phone's or depth camera's capture").add_subparsers(dest="action", required=True)
+    p = capture.add_parser("fuse", help="fuse a capture's depth frames into one coloured cloud (TSDF)")
+    p.add_argument("source", type=Path, help="the capture folder: nerfstudio transforms.json, Polycam raw data, or a "
+                                             "depth folder (depth/, poses/, intrinsics.yaml)")
+    p.add_argument("--output", type=Path, required=True, help="the cloud to write (.ply, with colours)")
+    p.add_argument("--format", default=None, choices=FORMATS, help="the capture's layout (default: detected)")
+    p.add_argument("--scale", default="plant", choices=list(SCALES),
+                   help="defaults for a single plant (5 mm voxels, depth up to 1.5 m) or a greenhouse row (1 cm, "
+                        "3 m) (default: %(default)s)")
+    p.add_argument("--voxel-size", type=float, default=None, help="TSDF voxel, m (default: the scale's)")
+    p.add_argument("--truncation", type=float, default=None, help="TSDF truncation, m (default: the scale's, 2 voxels)")
+    p.add_argument("--max-depth", type=float, default=None, help="depth beyond this is background, m")
+    p.add_argument("--min-confidence", type=int, default=None, choices=[0, 1, 2],
+                   help="drop depth below this ARKit confidence level (default: 1, medium)")
+    p.add_argument("--support", type=float, default=None,
+                   help="keep a surface point where a frame measured it within this, m (default: the scale's)")
+    p.add_argument("--depth-scale", type=float, default=None,
+                   help="metres per depth unit (default: 0.001 for 16-bit PNG, 1 for .npy, or the intrinsics')")
+    p.add_argument("--force", action="store_true", help="replace an existing output")
+    p.set_defaults(func=_capture_fuse)
+    p = capture.add_parser("standin", help="write a capture of a generated plant or row (check an import offline)")
+    p.add_argument("--format", required=True, choices=FORMATS, help="the layout to write")
+    p.add_argument("--output", type=Path, required=True, help="the capture folder to write")
+    p.add_argument("--scene", default="plant", choices=["plant", "row"],
+                   help="an orbit around a plant, or the handheld walk along a row (default: %(default)s)")
+    p.add_argument("--species", default="tomato", choices=["tomato", "maize"], help="the plant (default: %(default)s)")
+    p.add_argument("--size", type=float, default=0.4, help="the plant's largest side, m (default: %(default)s)")
+    p.add_argument("--frames", type=int, default=120, help="frames of the orbit (default: %(default)s)")
+    p.add_argument("--room", default="room1", choices=["room1", "room4"], help="the row's room (default: %(default)s)")
+    p.add_argument("--seed", type=int, default=0, help="random seed of the generated scene (default: %(default)s)")
+    p.add_argument("--force", action="store_true", help="replace an existing stand-in folder")
+    p.set_defaults(func=_capture_standin)
 
     p = sub.add_parser("prepare-session", help="add a new scan of a site to a dataset (crop, clean, align)")
     p.add_argument("--site", required=True, help="site name, e.g. room1 (letters, digits, '-', '_')")

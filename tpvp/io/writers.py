@@ -20,8 +20,9 @@ from tpvp.registry import Registry
 WRITERS = Registry("point-cloud writer")
 
 
-def write_point_cloud(path, points, labels=None, binary: bool = True, *, dtype=None) -> Path:
-    """Write points (and optional integer labels) atomically; returns the path.
+def write_point_cloud(path, points, labels=None, binary: bool = True, *, dtype=None, colors=None) -> Path:
+    """Write points (and optional integer labels, and for .ply optional ``(N, 3)`` uint8 RGB
+    ``colors``) atomically; returns the path.
 
     By extension: .ply (binary little-endian, or ascii with ``binary=False``), .pcd (binary or
     ascii), .xyz/.txt/.pts/.csv text (``x y z [label]``; .csv comma-separated; .pts starts with
@@ -53,7 +54,13 @@ def write_point_cloud(path, points, labels=None, binary: bool = True, *, dtype=N
     if labels is not None:
         labels = _integer_labels(labels, len(pts))
     fmt = "%.9g" if dt == np.float32 else "%.17g"
-    atomic_write_bytes(path, WRITERS.get(ext)(pts.astype(dt), labels, binary, fmt))
+    if colors is None:
+        data = WRITERS.get(ext)(pts.astype(dt), labels, binary, fmt)
+    elif ext != ".ply":
+        raise ConfigError(f"{path}: colours are written to .ply files only")
+    else:
+        data = encode_ply(pts.astype(dt), labels, binary, fmt, _colours(colors, len(pts)))
+    atomic_write_bytes(path, data)
     return path
 
 
@@ -71,8 +78,15 @@ def _integer_labels(labels, n: int) -> np.ndarray:
     return lab
 
 
+def _colours(colors, n: int) -> np.ndarray:
+    rgb = np.asarray(colors)
+    if rgb.shape != (n, 3) or rgb.dtype != np.uint8:
+        raise ConfigError(f"colors must be an ({n}, 3) uint8 array, got {rgb.shape} {rgb.dtype}")
+    return rgb
+
+
 @WRITERS.register(".ply")
-def encode_ply(pts: np.ndarray, labels, binary: bool, fmt: str) -> bytes:
+def encode_ply(pts: np.ndarray, labels, binary: bool, fmt: str, colors=None) -> bytes:
     ptype = "float" if pts.dtype == np.float32 else "double"
     header = [
         "ply",
@@ -81,9 +95,10 @@ def encode_ply(pts: np.ndarray, labels, binary: bool, fmt: str) -> bytes:
         f"element vertex {len(pts)}",
         *(f"property {ptype} {c}" for c in "xyz"),
         *(["property int label"] if labels is not None else []),
+        *([f"property uchar {c}" for c in ("red", "green", "blue")] if colors is not None else []),
         "end_header",
     ]
-    body = _packed(pts, labels, "<", "i4") if binary else _text_body(pts, labels, fmt, " ")
+    body = _packed(pts, labels, "<", "i4", colors) if binary else _text_body(pts, labels, fmt, " ", colors)
     return ("\n".join(header) + "\n").encode("ascii") + body
 
 
@@ -127,23 +142,31 @@ for _extension in TEXT_EXTENSIONS:
 WRITE_EXTENSIONS = (".ply", ".pcd") + TEXT_EXTENSIONS
 
 
-def _packed(pts: np.ndarray, labels, endian: str, label_code: str) -> bytes:
+def _packed(pts: np.ndarray, labels, endian: str, label_code: str, colors=None) -> bytes:
     fields = [(c, endian + pts.dtype.str[1:]) for c in "xyz"]
     if labels is not None:
         fields.append(("label", endian + label_code))
+    if colors is not None:
+        fields += [(c, "u1") for c in ("red", "green", "blue")]
     rec = np.empty(len(pts), dtype=fields)
     for j, c in enumerate("xyz"):
         rec[c] = pts[:, j]
     if labels is not None:
         rec["label"] = labels
+    if colors is not None:
+        for j, c in enumerate(("red", "green", "blue")):
+            rec[c] = colors[:, j]
     return rec.tobytes()
 
 
-def _text_body(pts: np.ndarray, labels, fmt: str, delim: str) -> bytes:
+def _text_body(pts: np.ndarray, labels, fmt: str, delim: str, colors=None) -> bytes:
     buf = io.StringIO()
-    if labels is None:
-        np.savetxt(buf, pts, fmt=fmt, delimiter=delim)
-    else:
-        table = np.column_stack([pts.astype(np.float64), labels.astype(np.float64)])
-        np.savetxt(buf, table, fmt=[fmt] * 3 + ["%d"], delimiter=delim)
+    columns, formats = [pts.astype(np.float64)], [fmt] * 3
+    if labels is not None:
+        columns.append(labels.astype(np.float64)[:, None])
+        formats.append("%d")
+    if colors is not None:
+        columns.append(colors.astype(np.float64))
+        formats += ["%d"] * 3
+    np.savetxt(buf, np.column_stack(columns), fmt=formats, delimiter=delim)
     return buf.getvalue().encode("ascii")

@@ -17,19 +17,23 @@ import yaml
 
 from tpvp.errors import InputFileError
 from tpvp.io.plan import CAMERA_AXES
-from tpvp.sensor.camera import rotation_to_quaternion
+from tpvp.sensor.camera import rigid_error, rotation_to_quaternion
 
 PLAN_COLUMNS = ("step", "role", "x", "y", "z", "look_x", "look_y", "look_z", "qx", "qy", "qz", "qw")
 #: How far a transform's rotation may be from a proper rotation (orthonormal, determinant +1).
 RIGID_TOLERANCE = 1e-6
 
 
+def plan_file(path) -> Path:
+    """The ``plan.csv`` that ``path`` names: itself, or the one in the folder ``path``."""
+    path = Path(path)
+    return path / "plan.csv" if path.is_dir() else path
+
+
 def read_plan(path) -> pd.DataFrame:
     """A plan written by ``tpvp plan`` / ``tpvp session plan`` (``plan.csv``, or the folder holding
     it), its views in execution order; one clear error for anything else."""
-    path = Path(path)
-    if path.is_dir():
-        path = path / "plan.csv"
+    path = plan_file(path)
     if not path.is_file():
         raise InputFileError(f"{path}: no such plan (a plan.csv written by tpvp plan or tpvp session plan)")
     try:
@@ -64,9 +68,7 @@ def read_transform(path) -> np.ndarray:
     if matrix.shape != (4, 4) or not np.isfinite(matrix).all():
         raise InputFileError(f"{path}: a transform is a 4x4 matrix of numbers (or a mapping with it under "
                              f"'matrix'), got {json.dumps(data)[:80]}")
-    rotation = matrix[:3, :3]
-    error = max(np.abs(rotation @ rotation.T - np.eye(3)).max(), abs(np.linalg.det(rotation) - 1.0),
-                np.abs(matrix[3] - [0, 0, 0, 1]).max())
+    error = rigid_error(matrix)
     if error > RIGID_TOLERANCE:
         raise InputFileError(f"{path}: not a rigid transform (its rotation is off a proper rotation by {error:.3g}, "
                              f"or its last row is not 0 0 0 1): a scaled or sheared matrix would move the views "
@@ -92,6 +94,14 @@ def moved_plan(table: pd.DataFrame, matrix: np.ndarray) -> pd.DataFrame:
                    for q in table[["qx", "qy", "qz", "qw"]].to_numpy(dtype=np.float64)]
     moved[["qx", "qy", "qz", "qw"]] = np.asarray(quaternions).reshape(-1, 4)
     return moved
+
+
+def plan_poses(table: pd.DataFrame) -> np.ndarray:
+    """The plan's camera-to-world poses in execution order, ``(V, 4, 4)`` (OpenCV camera axes)."""
+    poses = np.tile(np.eye(4), (len(table), 1, 1))
+    poses[:, :3, 3] = table[["x", "y", "z"]].to_numpy(dtype=np.float64)
+    poses[:, :3, :3] = [quaternion_to_rotation(q) for q in table[["qx", "qy", "qz", "qw"]].to_numpy(dtype=np.float64)]
+    return poses
 
 
 def moveit_goals(table: pd.DataFrame, frame: str, matrix: np.ndarray, source: str) -> str:

@@ -33,8 +33,19 @@ class Intrinsics:
     def matrix(self) -> np.ndarray:
         return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
 
+    def resized(self, width: int, height: int) -> "Intrinsics":
+        """The same camera's intrinsics for an image of ``width`` x ``height`` pixels (a phone's
+        depth map beside its colour image): the image's corners stay where they are, so the
+        principal point scales about the top-left pixel's corner, half a pixel before its centre."""
+        sx, sy = width / self.width, height / self.height
+        return Intrinsics(self.fx * sx, self.fy * sy, (self.cx + 0.5) * sx - 0.5, (self.cy + 0.5) * sy - 0.5,
+                          int(width), int(height))
+
 
 D435 = Intrinsics()
+#: Where nerfstudio and COLMAP put the top-left pixel's centre in tpvp's pixel coordinates (those of
+#: OpenCV and Open3D, where it is (0, 0)): their principal point is tpvp's plus this.
+PIXEL_CENTRE = 0.5
 
 
 def look_at_rotation(position, look_at) -> np.ndarray:
@@ -88,6 +99,24 @@ def rotation_to_quaternion(rotation: np.ndarray) -> np.ndarray:
         q[k] = (m[k, i] + m[i, k]) / s
     q = np.asarray(q)
     return q / np.linalg.norm(q)
+
+
+def rigid_error(matrix) -> float:
+    """How far a 4x4 matrix is from a rigid transform: the largest deviation of its rotation from
+    an orthonormal matrix of determinant +1, or of its last row from 0 0 0 1 (0 for a rigid one)."""
+    matrix = np.asarray(matrix, dtype=np.float64)
+    rotation = matrix[:3, :3]
+    return float(max(np.abs(rotation @ rotation.T - np.eye(3)).max(), abs(np.linalg.det(rotation) - 1.0),
+                     np.abs(matrix[3] - [0, 0, 0, 1]).max()))
+
+
+def switch_camera_axes(camera_to_world) -> np.ndarray:
+    """A ``(..., 4, 4)`` camera-to-world pose with OpenCV camera axes (x right, y down, z forward)
+    as the same pose with OpenGL's (x right, y up, z backward: nerfstudio's ``transform_matrix``),
+    and back: the y and z axes change sign, so the function is its own inverse."""
+    pose = np.array(camera_to_world, dtype=np.float64)
+    pose[..., :3, 1:3] *= -1.0
+    return pose
 
 
 def project(points, position, rotation, intrinsics: Intrinsics = D435):

@@ -230,11 +230,22 @@ class Session:
         return self.pose_request(left[0], f"planned view {number} of {len(plan['planned_views'])}")
 
     def pose_request(self, view: int, role: str) -> Request:
+        pose = self.view_pose(view)
+        look_at = self.scene.to_scan(self.views()[1][[view]])[0]
+        return Request(int(view), pose[:3, 3], look_at, rotation_to_quaternion(pose[:3, :3]), role)
+
+    def view_pose(self, view: int) -> np.ndarray:
+        """The camera-to-world pose of ``view`` (4x4, world frame, metres; OpenCV camera axes)."""
         positions, look_ats = self.views()
-        position, look_at = self.scene.to_scan(positions[[view]])[0], self.scene.to_scan(look_ats[[view]])[0]
         linear = self.scene.plant_from_scan[:3, :3] / self.scene.scan_scale
-        rotation = linear.T @ look_at_rotation(positions[view], look_ats[view])
-        return Request(int(view), position, look_at, rotation_to_quaternion(rotation), role)
+        pose = np.eye(4)
+        pose[:3, :3] = linear.T @ look_at_rotation(positions[view], look_ats[view])
+        pose[:3, 3] = self.scene.to_scan(positions[[view]])[0]
+        return pose
+
+    def capture_poses(self) -> np.ndarray:
+        """Every capture's camera-to-world pose (:meth:`view_pose` of its view), in capture order: (N, 4, 4)."""
+        return np.stack([self.view_pose(c["view"]) for c in self.captures]) if self.captures else np.zeros((0, 4, 4))
 
     def resolve_view(self, view=None, pose: Pose | None = None) -> tuple[int, float]:
         """``(view index, distance from the given pose in m)``: ``view`` (an index, or a name of the

@@ -23,6 +23,7 @@ import pandas as pd
 
 from tpvp.viz.figures import _save, _subsample, plt
 from tpvp.errors import TpvpError
+from tpvp.metrics.geometry import nearest_distances
 
 __all__ = [
     "CLEANING_STEPS",
@@ -92,6 +93,68 @@ def plot_prepared_pair(path, previous, current, normalised, ground_truth, names=
                 ax.set_title(columns[k], fontsize=8)
         if row == 0:
             _legend(axes[0, 0])
+    if title:
+        fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    return _save(fig, path)
+
+
+def plot_capture_frame(path, colour, depth, positions, points, frame: int, title: str = "") -> Path:
+    """One frame of a phone capture and where it was taken: its colour image, its depth image
+    (metres; white: none) and the camera path seen from above over the scene's points, the frame's
+    camera marked."""
+    positions, points = np.asarray(positions, float).reshape(-1, 3), np.asarray(points, float).reshape(-1, 3)
+    fig, axes = plt.subplots(1, 3, figsize=(13, 3.8), gridspec_kw={"width_ratios": [1.3, 1.3, 1]})
+    axes[0].imshow(colour)
+    axes[0].set_title(f"frame {frame}: colour ({colour.shape[1]} x {colour.shape[0]})", fontsize=8)
+    shown = axes[1].imshow(np.where(np.isfinite(depth), depth, np.nan), cmap="viridis")
+    fig.colorbar(shown, ax=axes[1], fraction=0.04, label="depth (m)")
+    axes[1].set_title(f"depth ({depth.shape[1]} x {depth.shape[0]}, {np.isfinite(depth).mean():.0%} of the "
+                      f"pixels measured)", fontsize=8)
+    for ax in axes[:2]:
+        ax.set_xticks([])
+        ax.set_yticks([])
+    _scatter(axes[2], points, (0, 1), colour="tab:green", size=0.2)
+    axes[2].plot(positions[:, 0], positions[:, 1], ".-", color="0.5", ms=2, lw=0.5, label=f"{len(positions)} frames")
+    axes[2].plot(*positions[frame, :2], "o", color="tab:red", ms=6, label=f"frame {frame}")
+    axes[2].set_aspect("equal", adjustable="datalim")
+    axes[2].set_xlabel("x (m)", fontsize=8)
+    axes[2].set_ylabel("y (m)", fontsize=8)
+    axes[2].tick_params(labelsize=7)
+    axes[2].set_title("the camera path from above", fontsize=8)
+    _legend(axes[2])
+    if title:
+        fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    return _save(fig, path)
+
+
+def plot_fused_capture(path, fused, colours, truth, title: str = "") -> Path:
+    """A fused capture against the truth: the fused points in their colours over the truth (grey)
+    from the side and from above, and the distances of each to the other (mm)."""
+    fused, truth = np.asarray(fused, float).reshape(-1, 3), np.asarray(truth, float).reshape(-1, 3)
+    there, back = 1000 * nearest_distances(fused, truth), 1000 * nearest_distances(truth, fused)
+    fig, axes = plt.subplots(1, 3, figsize=(13, 4))
+    for ax, axes_pair, labels in ((axes[0], (0, 2), ("x (m)", "z (m)")), (axes[1], (0, 1), ("x (m)", "y (m)"))):
+        _scatter(ax, truth, axes_pair, colour="0.75", size=0.2, label=f"truth ({len(truth):,} points)")
+        keep = np.random.default_rng(0).permutation(len(fused))[:15000]
+        ax.scatter(fused[keep, axes_pair[0]], fused[keep, axes_pair[1]], c=np.asarray(colours)[keep] / 255.0, s=1.0,
+                   linewidths=0, label=f"fused ({len(fused):,} points)")
+        ax.set_aspect("equal", adjustable="datalim")
+        ax.set_xlabel(labels[0], fontsize=8)
+        ax.set_ylabel(labels[1], fontsize=8)
+        ax.tick_params(labelsize=7)
+    axes[0].set_title("from the side", fontsize=8)
+    axes[1].set_title("from above", fontsize=8)
+    _legend(axes[0])
+    bins = np.linspace(0, max(np.percentile(np.concatenate([there, back]), 99), 1.0), 40)
+    axes[2].hist(there, bins, alpha=0.6, color="tab:blue", label=f"fused -> truth: mean {there.mean():.2f} mm")
+    axes[2].hist(back, bins, alpha=0.6, color="tab:orange", label=f"truth -> fused: mean {back.mean():.2f} mm")
+    axes[2].set_xlabel("distance to the nearest point of the other (mm)", fontsize=8)
+    axes[2].set_ylabel("points", fontsize=8)
+    axes[2].tick_params(labelsize=7)
+    axes[2].set_title(f"Chamfer distance {0.5 * (there.mean() + back.mean()):.2f} mm", fontsize=8)
+    axes[2].legend(fontsize=7)
     if title:
         fig.suptitle(title, fontsize=10)
     fig.tight_layout()

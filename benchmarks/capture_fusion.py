@@ -1,0 +1,170 @@
+"""Capture import measured (issue 38): the stand-in phone's captures fused and compared with the
+generated truth, a plan made from a fused cloud beside the plan made from the truth, and the fusion
+speed of a 1,000-frame 256 x 192 capture.
+
+* accuracy: plants (tomato and maize, seeds 0-2, 120-frame orbits, ``--scale plant``: 5 mm voxels)
+  and rows (room1 and room4, the handheld walk, ``--scale row``: 1 cm): the Chamfer distance of the
+  fused cloud to the truth (all of it, and what the capture saw), both directed means and the point
+  counts; the three layouts of one plant capture, their largest difference.
+* plan: the same plants, today's session (``today.ply``: two days later, the same 0.4 m scale) planned
+  by ``tpvp plan`` from the fused capture and from the generated previous session (``truth.ply``):
+  views, true coverage, path length.
+* speed: a 1,000-frame orbit written as a depth folder, then read and fused (``--scale plant``);
+  the anchor is reading the same frames' depth and colour images alone, in the same process.
+
+Usage:
+    python benchmarks/capture_fusion.py [--modes accuracy plan speed] [--work DIR]
+Writes benchmarks/results/capture_fusion.md (with this command) and prints the tables.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import tempfile
+import time
+from pathlib import Path
+
+import pandas as pd
+
+from data_tools.capture.formats import FORMATS, load_colour, load_depth, read_capture
+from data_tools.capture.fusion import fuse, fusion_config
+from data_tools.capture.standin import plant_scene, row_scene, write_standin
+from results_file import write_results
+from tpvp.io import read_point_cloud, write_point_cloud
+from tpvp.metrics.geometry import nearest_distances
+
+RESULTS = Path(__file__).resolve().parent / "results" / "capture_fusion.md"
+SIZE = 0.4  # m, the plants' largest side
+
+
+def _distances(fused, truth) -> dict:
+    there, back = nearest_distances(fused, truth).mean(), nearest_distances(truth, fused).mean()
+    return {"fused_to_truth_mm": 1000 * there, "truth_to_fused_mm": 1000 * back, "chamfer_mm": 500 * (there + back)}
+
+
+def _fused(folder: Path, scale: str):
+    start = time.perf_counter()
+    capture = read_capture(folder)
+    points, _ = fuse(capture, fusion_config(scale), progress=False)
+    return points, len(capture.frames), time.perf_counter() - start
+
+
+def accuracy(work: Path) -> list:
+    rows, layouts = [], []
+    for species in ("tomato", "maize"):
+        for seed in (0, 1, 2):
+            folder = write_standin(work / f"{species}{seed}", "nerfstudio", plant_scene(species, seed, SIZE),
+                                   progress=False)
+            rows.append(_accuracy_row(f"{species} seed {seed}", folder, "plant"))
+    prepared = []
+    for room in ("room1", "room4"):
+        folder = write_standin(work / room, "polycam", row_scene(room, 0), progress=False)
+        rows.append(_accuracy_row(f"{room} row seed 0", folder, "row"))
+        prepared.append(_prepared_row(room, folder, work))
+    scene = plant_scene("tomato", 0, SIZE)
+    clouds = {fmt: _fused(write_standin(work / f"layout_{fmt}", fmt, scene, progress=False), "plant")[0]
+              for fmt in FORMATS}
+    for fmt in FORMATS:
+        layouts.append({"layout": fmt, "points": len(clouds[fmt]),
+                        "largest difference to nerfstudio's (m)": float(nearest_distances(clouds[fmt],
+                                                                                          clouds["nerfstudio"]).max())})
+    return [("Fused cloud against the generated truth", pd.DataFrame(rows)),
+            ("One capture in three layouts (tomato seed 0)", pd.DataFrame(layouts)),
+            ("A fused row through prepare-session (a new dataset: its reference day)", pd.DataFrame(prepared))]
+
+
+def _prepared_row(room: str, folder: Path, work: Path) -> dict:
+    """The fused row handed to ``prepare-session`` as a new site's first day: what it keeps."""
+    from data_tools.sessions import prepare_session
+
+    points, _, _ = _fused(folder, "row")
+    scan = write_point_cloud(work / f"{room}_fused.ply", points)
+    row = prepare_session(work / f"dataset_{room}", room, "2025-09-15", scan)
+    kept = read_point_cloud(work / f"dataset_{room}" / row["file"], units="m")
+    truth, seen = read_point_cloud(folder / "truth.ply", units="m", return_labels=True)
+    return {"room": room, "fused points": len(points), "points after prepare-session": len(kept),
+            **{f"prepared vs seen truth: {k}": v for k, v in _distances(kept, truth[seen == 1]).items()}}
+
+
+def _accuracy_row(name: str, folder: Path, scale: str) -> dict:
+    truth, seen = read_point_cloud(folder / "truth.ply", units="m", return_labels=True)
+    points, frames, seconds = _fused(folder, scale)
+    row = {"case": name, "scale": scale, "frames": frames, "fused points": len(points),
+           "truth points seen %": 100 * float((seen == 1).mean()), "seconds": seconds}
+    row.update({f"all: {k}": v for k, v in _distances(points, truth).items()})
+    row.update({f"seen: {k}": v for k, v in _distances(points, truth[seen == 1]).items()})
+    return row
+
+
+def _plan(previous: Path, current: Path, output: Path) -> dict:
+    from tpvp.cli import main
+
+    if main(["plan", "--previous", str(previous), "--current", str(current), "--output", str(output),
+             "--units", "m"]) != 0:
+        raise SystemExit(f"tpvp plan failed on {previous}")
+    table = pd.read_csv(output / "results.csv")
+    return table.iloc[0][["views", "coverage", "path_length_m", "chamfer_after_mm"]].to_dict()
+
+
+def plan(work: Path) -> list:
+    rows = []
+    for species in ("tomato", "maize"):
+        for seed in (0, 1, 2):
+            scene = plant_scene(species, seed, SIZE)
+            capture = write_standin(work / f"pair_{species}{seed}", "nerfstudio", scene, progress=False)
+            fused, _, _ = _fused(capture, "plant")
+            fused_file = write_point_cloud(work / f"pair_{species}{seed}_fused.ply", fused)
+            from_truth = _plan(capture / "truth.ply", capture / "today.ply", work / f"plan_truth_{species}{seed}")
+            from_fused = _plan(fused_file, capture / "today.ply", work / f"plan_fused_{species}{seed}")
+            rows.append({"case": f"{species} seed {seed}", "previous points (truth / fused)":
+                         f"{len(scene.points)} / {len(fused)}",
+                         "views (truth)": from_truth["views"], "views (fused)": from_fused["views"],
+                         "coverage % (truth)": 100 * from_truth["coverage"],
+                         "coverage % (fused)": 100 * from_fused["coverage"],
+                         "path m (truth)": from_truth["path_length_m"], "path m (fused)": from_fused["path_length_m"],
+                         "registration Chamfer mm (truth / fused)":
+                         f"{from_truth['chamfer_after_mm']:.2f} / {from_fused['chamfer_after_mm']:.2f}"})
+    return [("tpvp plan of today's plant from the fused capture of the previous session and from its truth "
+             "(hemisphere, paper)", pd.DataFrame(rows))]
+
+
+def speed(work: Path) -> list:
+    folder = write_standin(work / "thousand", "depth", plant_scene("tomato", 0, SIZE, frames=1000))
+    capture = read_capture(folder)
+    start = time.perf_counter()
+    for frame in capture.frames:
+        depth, _ = load_depth(frame)
+        load_colour(frame, depth.shape)
+    reading = time.perf_counter() - start
+    points, frames, fusing = _fused(folder, "plant")
+    k = capture.frames[0].intrinsics
+    return [("Fusion speed", pd.DataFrame([{
+        "frames": frames, "depth pixels": f"{k.width} x {k.height}", "fused points": len(points),
+        "fusion s (read + integrate + extract + support)": fusing, "reading the images alone s (anchor)": reading,
+        "fusion / anchor": fusing / reading, "ms per frame": 1000 * fusing / frames}]))]
+
+
+MODES = {"accuracy": accuracy, "plan": plan, "speed": speed}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--modes", nargs="+", default=list(MODES), choices=list(MODES))
+    parser.add_argument("--work", type=Path, default=None, help="folder for the captures (default: a temporary one)")
+    args = parser.parse_args()
+    with tempfile.TemporaryDirectory() as temporary:
+        work = args.work or Path(temporary)
+        tables = []
+        for mode in args.modes:
+            start = time.perf_counter()
+            tables += MODES[mode](work)
+            print(f"{mode}: {time.perf_counter() - start:.0f} s")
+            for title, table in tables:
+                print(f"\n{title}\n{table.to_string(index=False)}")
+    write_results(RESULTS, tables, f"modes {', '.join(args.modes)}; on 2 cores")
+    print(json.dumps({"results": str(RESULTS)}))
+
+
+if __name__ == "__main__":
+    main()

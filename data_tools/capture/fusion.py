@@ -1,0 +1,130 @@
+"""Depth frames fused into one coloured surface cloud: Open3D's TSDF integration.
+
+Each frame's depth (metres, past ``max_depth`` and below the confidence floor dropped) is
+integrated with its colour at its camera-to-world pose into a scalable TSDF volume of
+``voxel_size`` voxels truncated at ``truncation``; the surface points are the volume's zero
+crossings, in metres in the capture's world frame, with their colours. :data:`SCALES` holds the
+defaults of a single plant (5 mm voxels) and of a greenhouse row (1 cm).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from data_tools.capture.formats import Capture, check_depth_units, load_colour, load_confidence, load_depth
+from data_tools.errors import ConfigError, PointCloudError
+
+GREY = 128  # the colour of a frame without a colour image
+BLOCK_RESOLUTION = 8  # voxels along a block's side
+INITIAL_BLOCKS = 10_000  # the block hash map's first capacity (it grows)
+
+
+@dataclass(frozen=True)
+class FusionConfig:
+    """TSDF fusion options (defaults: a single plant seen from about half a metre)."""
+
+    voxel_size: float = 0.005  # m
+    max_depth: float = 1.5  # m: depth farther than this is background
+    min_confidence: int = 1  # ARKit's levels: 0 low, 1 medium, 2 high
+    min_weight: float = 1.0  # frames (weighted) that must have seen a surface voxel to keep it
+    truncation: float = 0.01  # m: the signed distance's band, two voxels
+    support: float = 0.005  # m: a surface point is kept where a frame measured it within this
+
+    def __post_init__(self):
+        for name in ("voxel_size", "truncation", "max_depth", "support"):
+            if not getattr(self, name) > 0:
+                raise ConfigError(f"fusion: {name} must be > 0 m, got {getattr(self, name)!r}")
+        if self.truncation < self.voxel_size:
+            raise ConfigError(f"fusion: the truncation ({self.truncation} m) must be at least one voxel "
+                              f"({self.voxel_size} m)")
+        if not self.min_weight >= 0:
+            raise ConfigError(f"fusion: min_weight must be >= 0, got {self.min_weight!r}")
+        if self.min_confidence not in (0, 1, 2):
+            raise ConfigError(f"fusion: min_confidence is an ARKit level 0, 1 or 2, got {self.min_confidence!r}")
+
+
+#: Defaults by the scale of what was captured.
+SCALES = {"plant": FusionConfig(),
+          "row": FusionConfig(voxel_size=0.01, truncation=0.02, support=0.01, max_depth=3.0)}
+
+
+def fusion_config(scale: str = "plant", **options) -> FusionConfig:
+    """The defaults of ``scale`` with the given options (None: the default) replaced."""
+    if scale not in SCALES:
+        raise ConfigError(f"unknown scale {scale!r}; choose one of {', '.join(SCALES)}")
+    return replace(SCALES[scale], **{k: v for k, v in options.items() if v is not None})
+
+
+def fuse(capture: Capture, config: FusionConfig = FusionConfig(), progress: bool = True):
+    """``(points, colours)``: the fused surface of every frame, ``(N, 3)`` metres in the capture's
+    world frame and ``(N, 3)`` uint8 RGB."""
+    import open3d as o3d
+    import open3d.core as o3c
+    from tqdm.auto import tqdm
+
+    # Open3D's tensor voxel-block grid (its hash map grows as blocks are touched); its legacy
+    # ScalableTSDFVolume integrated nothing in open3d-cpu 0.20.
+    volume = o3d.t.geometry.VoxelBlockGrid(
+        attr_names=("tsdf", "weight", "color"), attr_dtypes=(o3c.float32, o3c.float32, o3c.float32),
+        attr_channels=(1, 1, 3), voxel_size=config.voxel_size, block_resolution=BLOCK_RESOLUTION,
+        block_count=INITIAL_BLOCKS, device=o3c.Device("CPU:0"))
+    band = config.truncation / config.voxel_size  # Open3D's truncation, in voxels
+    measured = []  # every frame's depth (float32) and intrinsics, for the support check
+    check_depth_units(load_depth(capture.frames[0])[0], capture.frames[0])
+    for frame in tqdm(capture.frames, desc="fusing", unit="frame", disable=not progress):
+        depth, k = load_depth(frame)
+        confidence = load_confidence(frame, depth.shape)
+        if confidence is not None:
+            depth[confidence < config.min_confidence] = np.nan
+        depth[~(depth <= config.max_depth)] = 0.0  # NaN and beyond the range: no measurement
+        measured.append((depth.astype(np.float32), k))
+        colour = load_colour(frame, depth.shape)
+        colour = np.full((*depth.shape, 3), GREY / 255.0) if colour is None else colour / 255.0
+        depth_image = o3d.t.geometry.Image(o3c.Tensor(depth.astype(np.float32)))
+        colour_image = o3d.t.geometry.Image(o3c.Tensor(np.ascontiguousarray(colour, dtype=np.float32)))
+        intrinsic = o3c.Tensor(k.matrix())
+        extrinsic = o3c.Tensor(np.linalg.inv(frame.camera_to_world))
+        blocks = volume.compute_unique_block_coordinates(depth_image, intrinsic, extrinsic, 1.0, config.max_depth, band)
+        volume.integrate(blocks, depth_image, colour_image, intrinsic, intrinsic, extrinsic, 1.0, config.max_depth,
+                         band)
+    cloud = volume.extract_point_cloud(weight_threshold=config.min_weight)
+    points = cloud.point.positions.numpy().astype(np.float64) if "positions" in cloud.point else np.zeros((0, 3))
+    if len(points) == 0:
+        raise PointCloudError(f"{capture.folder}: the fusion found no surface: no frame has depth within "
+                              f"{config.max_depth} m at confidence {config.min_confidence} or more (--max-depth, "
+                              f"--min-confidence)")
+    colours = np.clip(np.rint(cloud.point.colors.numpy() * 255.0), 0, 255).astype(np.uint8)
+    poses = [frame.camera_to_world for frame in capture.frames]
+    kept = supported(points, poses, measured, config.support)
+    if not kept.any():
+        raise PointCloudError(f"{capture.folder}: no fused surface point lies within {config.support} m of a "
+                              f"measured depth (--support)")
+    # The hash map's order depends on its threads: sorted, the output is the same on every run.
+    order = np.lexsort(points[kept].T[::-1])
+    return points[kept][order], colours[kept][order]
+
+
+def supported(points, poses, measured, tolerance: float) -> np.ndarray:
+    """Mask of the ``points`` some frame measured: projected into a frame (``poses``: its
+    camera-to-world, OpenCV axes; ``measured``: its depth in metres, 0 for none, and intrinsics),
+    the depth of the nearest pixel lies within ``tolerance`` of the point's own depth.
+
+    Where the views of a thin leaf from both sides meet, the truncated distances cancel and the
+    volume holds zero crossings up to a truncation away from any surface; no frame measured those.
+    """
+    points = np.asarray(points, dtype=np.float64)
+    kept = np.zeros(len(points), dtype=bool)
+    for pose, (depth, k) in zip(poses, measured):
+        local = (points - pose[:3, 3]) @ pose[:3, :3]
+        z = local[:, 2]
+        front = z > 0
+        u = np.full(len(points), -1)
+        v = np.full(len(points), -1)
+        u[front] = np.rint(k.fx * local[front, 0] / z[front] + k.cx)
+        v[front] = np.rint(k.fy * local[front, 1] / z[front] + k.cy)
+        inside = np.flatnonzero(front & (u >= 0) & (u < k.width) & (v >= 0) & (v < k.height))
+        at = depth[v[inside], u[inside]]
+        kept[inside[(at > 0) & (np.abs(at - z[inside]) <= tolerance)]] = True
+    return kept
