@@ -45,6 +45,17 @@ def _pheno4d_prepare(args) -> int:
     return 0
 
 
+def _helios(args) -> int:
+    from data_tools.helios import HeliosConfig, prepare_helios
+
+    config = HeliosConfig(spacing=args.spacing, plants=args.plants, seed=args.seed)
+    table = prepare_helios(args.output, args.species, args.ages, config, force=args.force)
+    print(f"grew {table['plant'].nunique()} plant(s) of {len(args.species)} species through {len(args.ages)} "
+          f"session(s) each: {len(table)} scan(s), {table['points'].min():,}-{table['points'].max():,} points, "
+          f"{len(table.attrs.get('pairs', []))} session pair(s), into {args.output}/ (manifest.csv, pairs.csv)")
+    return 0
+
+
 def _greenhouse_download(args) -> int:
     from data_tools.kaggle_download import download_greenhouse
 
@@ -108,7 +119,8 @@ def _capture_fuse(args) -> int:
     if args.output.exists() and not args.force:
         raise TpvpError(f"{args.output} exists: pass --force to replace it")
     config = fusion_config(args.scale, voxel_size=args.voxel_size, truncation=args.truncation,
-                           max_depth=args.max_depth, min_confidence=args.min_confidence, support=args.support)
+                           max_depth=args.max_depth, min_confidence=args.min_confidence, spacing=args.spacing,
+                           support=args.support)
     capture = read_capture(args.source, args.format, args.depth_scale)
     print(f"{capture.folder}: {len(capture.frames)} frames ({capture.format}); fusing at {1000 * config.voxel_size:g} mm "
           f"voxels, truncation {1000 * config.truncation:g} mm, depth up to {config.max_depth:g} m "
@@ -163,6 +175,25 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--force", action="store_true", help="replace an existing dataset")
     p.set_defaults(func=_pheno4d_prepare)
 
+    p = sub.add_parser("helios", help="grow plants with Helios (pyhelios3d) into a prepared dataset with organ labels",
+                       description="Grow each species with Helios' PlantArchitecture from a seed through the given "
+                                   "ages (the first builds the plant, later ones advance the same plant), sample each "
+                                   "session's surface into points with organ labels, and write the layout of "
+                                   "pheno4d prepare. Needs the optional package pyhelios3d.")
+    p.add_argument("--species", nargs="+", required=True,
+                   help="Helios plant models, e.g. tomato bean maize (an unknown name lists the available ones)")
+    p.add_argument("--ages", nargs="+", type=int, required=True,
+                   help="session ages in days, strictly increasing (dated from the sowing day 2025-01-01)")
+    p.add_argument("--output", type=Path, required=True, help="dataset folder")
+    p.add_argument("--plants", type=int, default=1,
+                   help="plants per species, each from its own seed (default: %(default)s)")
+    p.add_argument("--seed", type=int, default=0,
+                   help="random seed of the plants and the sampling (default: %(default)s)")
+    p.add_argument("--spacing", type=float, default=0.00125,
+                   help="surface sampling: one point per spacing squared on average, m (default: %(default)s)")
+    p.add_argument("--force", action="store_true", help="replace an existing dataset")
+    p.set_defaults(func=_helios)
+
     green = sub.add_parser("greenhouse", help="the greenhouse multi-session row dataset").add_subparsers(dest="action", required=True)
     p = green.add_parser("download", help="download the dataset from Kaggle (needs an API token)")
     p.add_argument("--output", default="data/greenhouse_raw", help="download folder (default: %(default)s)")
@@ -203,6 +234,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--max-depth", type=float, default=None, help="depth beyond this is background, m")
     p.add_argument("--min-confidence", type=int, default=None, choices=[0, 1, 2],
                    help="drop depth below this ARKit confidence level (default: 1, medium)")
+    p.add_argument("--spacing", type=float, default=None,
+                   help="sample the fused surface mesh this far apart, m (default: the scale's, 1.25 mm / 5 mm)")
     p.add_argument("--support", type=float, default=None,
                    help="keep a surface point where a frame measured it within this, m (default: the scale's)")
     p.add_argument("--depth-scale", type=float, default=None,

@@ -15,5 +15,10 @@ class DatasetError(TpvpError, ValueError):
     """A dataset folder or manifest is inconsistent (missing columns, existing session, ...)."""
 
 
+class PlantSimulatorError(TpvpError):
+    """The plant simulator (Helios, the optional package pyhelios3d) cannot load, or failed to grow
+    a plant."""
+
+
 __all__ = ["ConfigError", "CredentialsError", "DatasetError", "DownloadError", "InputFileError",
-           "PointCloudError", "TpvpError"]
+           "PlantSimulatorError", "PointCloudError", "TpvpError"]

@@ -32,10 +32,9 @@ import pandas as pd
 from data_tools.download import download_file, verify_zip
 from data_tools.errors import ConfigError, DatasetError, InputFileError, TpvpError
 from data_tools.manifest import stage_table
-from tpvp.io import atomic_write_bytes, atomic_write_text, read_point_cloud, write_point_cloud
+from data_tools.prepared import MANIFEST_COLUMNS, PAIR_COLUMNS, Scan, ScanConfig, session_pairs, write_scan
+from tpvp.io import atomic_write_bytes, atomic_write_text, read_point_cloud
 from tpvp.io.publish import check_outputs_outside_inputs, staged_folder
-from tpvp.scene.normalise import normalise_plant
-from tpvp.scene.voxels import voxel_centres
 
 __all__ = [
     "MANIFEST_COLUMNS",
@@ -55,12 +54,6 @@ PHENO4D_PAGE = "https://www.ipb.uni-bonn.de/data/pheno4d/"
 PHENO4D_URL = "https://www.ipb.uni-bonn.de/html/projects/Pheno4D/Pheno4D.zip"
 ARCHIVE_NAME = "Pheno4D.zip"
 FOLDER_NAME = "Pheno4D"
-
-MANIFEST_COLUMNS = ("plant", "species", "date", "file", "normalised_file", "gt_file", "points",
-                    "plant_points", "extent_x", "extent_y", "extent_z", "scale", "gt_voxels", "labelled",
-                    "source")
-PAIR_COLUMNS = ("plant", "species", "previous_date", "current_date", "days_apart",
-                "previous_file", "current_file")
 
 EXPECTED_LAYOUT = ("plant folders Maize01..Maize07 / Tomato01..Tomato07 (possibly under a top "
                    "folder Pheno4D/) holding files like Maize01/M01_0313_a.txt or "
@@ -95,24 +88,23 @@ class Pheno4DConfig:
     soil_label: int | None = 0
 
     def __post_init__(self):
-        for name in ("largest_side", "gt_resolution"):
-            value = getattr(self, name)
-            if not isinstance(value, (int, float)) or isinstance(value, bool) \
-                    or not np.isfinite(value) or value <= 0:
-                raise ConfigError(f"{name} must be a positive number of metres, got {value!r}")
+        ScanConfig(self.largest_side, self.gt_resolution, self.centre)  # checks these three
         if not isinstance(self.year, int) or isinstance(self.year, bool) \
                 or not 1 <= self.year <= 9999:
             raise ConfigError(f"year must be an integer year, got {self.year!r}")
         if self.soil_label is not None and (not isinstance(self.soil_label, (int, np.integer))
                                             or isinstance(self.soil_label, bool)):
             raise ConfigError(f"soil_label must be an integer label or None, got {self.soil_label!r}")
-        if self.centre not in ("bbox", "centroid"):
-            raise ConfigError(f"centre must be 'bbox' or 'centroid', got {self.centre!r}")
+
+    @property
+    def scan(self) -> ScanConfig:
+        """How each scan's normalised copy and ground truth are made (:func:`data_tools.prepared.write_scan`)."""
+        return ScanConfig(self.largest_side, self.gt_resolution, self.centre)
 
     @property
     def gt_tag(self) -> str:
         """Resolution in the ground-truth file name: 0.002 -> "2mm", 0.0015 -> "1p5mm"."""
-        return f"{self.gt_resolution * 1000:g}".replace(".", "p") + "mm"
+        return self.scan.gt_tag
 
 
 @dataclass(frozen=True)
@@ -398,57 +390,15 @@ def _prepare_scan(record: ScanRecord, archive, prefix: str, workdir, stage,
             plant = labels != config.soil_label
             if not plant.any():
                 raise DatasetError(f"every point has the soil label {config.soil_label}: no plant left")
-        extent = np.ptp(points[plant], axis=0)
-        scene = normalise_plant(points[plant], largest_side=config.largest_side, centre=config.centre)
-        gt = voxel_centres(scene.points, config.gt_resolution)
     except TpvpError as exc:
         message = str(exc)
         if record.source not in message:
             message = f"{record.source}: {message}"
         raise type(exc)(message) from None
-
-    stem = f"{record.plant}_{record.date:%m%d}"
-    folder = Path(record.plant)
-    file = folder / f"{stem}.ply"
-    normalised_file = folder / f"{stem}_normalised.ply"
-    gt_file = folder / f"{stem}_gt{config.gt_tag}.ply"
-    plant_labels = labels[plant] if labels is not None else None
-    write_point_cloud(stage.path(file), points[plant], plant_labels)
-    write_point_cloud(stage.path(normalised_file), scene.points, plant_labels)
-    write_point_cloud(stage.path(gt_file), gt)
-    return {
-        "plant": record.plant,
-        "species": record.species,
-        "date": record.date.isoformat(),
-        "file": file.as_posix(),
-        "normalised_file": normalised_file.as_posix(),
-        "gt_file": gt_file.as_posix(),
-        "points": int(len(points)),
-        "plant_points": int(plant.sum()),
-        "extent_x": float(extent[0]),
-        "extent_y": float(extent[1]),
-        "extent_z": float(extent[2]),
-        "scale": float(scene.scale),
-        "gt_voxels": int(len(gt)),
-        "labelled": labels is not None,
-        "source": shown_source,
-    }
-
-
-def session_pairs(manifest: pd.DataFrame) -> pd.DataFrame:
-    """(previous, current) session pairs: each scan with the plant's next scan in time."""
-    rows = []
-    for plant, scans in manifest.sort_values(["plant", "date"]).groupby("plant", sort=True):
-        scans = scans.to_dict("records")
-        for previous, current in zip(scans, scans[1:]):
-            days = (dt.date.fromisoformat(current["date"])
-                    - dt.date.fromisoformat(previous["date"])).days
-            rows.append({"plant": plant, "species": current["species"],
-                         "previous_date": previous["date"], "current_date": current["date"],
-                         "days_apart": days, "previous_file": previous["file"],
-                         "current_file": current["file"]})
-    pairs = pd.DataFrame(rows, columns=list(PAIR_COLUMNS))
-    return pairs.astype({"days_apart": "int64"})
+    scan = Scan(record.plant, record.species, record.date, points[plant],
+                labels[plant] if labels is not None else None, "pheno4d", shown_source,
+                origin=record.source, scanned_points=len(points))
+    return write_scan(stage, scan, config.scan)
 
 
 def _write_notice(stage, source, config: Pheno4DConfig,

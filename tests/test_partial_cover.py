@@ -134,3 +134,49 @@ def test_one_model_for_many_targets_keeps_to_its_time():
         assert result.covered >= int(f * seen) and result.bound <= result.objective
         assert result.optimal == (result.bound == result.objective)
     assert [r.objective for r in results] == sorted(r.objective for r in results)
+
+
+def brute_fewest_grouped(a, groups, required, executed=()):
+    """Fewest non-executed views whose union with the executed ones covers ``required[g]`` voxels of
+    every group ``g`` (each clipped to what all views see)."""
+    a = np.asarray(a, dtype=bool)
+    base = a[list(executed)].any(axis=0) if len(executed) else np.zeros(a.shape[1], bool)
+    target = np.minimum(required, np.bincount(groups[a.any(axis=0)], minlength=len(required)))
+    views = [v for v in range(a.shape[0]) if v not in set(executed)]
+    for size in range(len(views) + 1):
+        for combo in itertools.combinations(views, size):
+            union = base | (a[list(combo)].any(axis=0) if combo else False)
+            if (np.bincount(groups[union], minlength=len(required)) >= target).all():
+                return size
+
+
+@pytest.mark.parametrize("solver", SOLVERS)
+def test_grouped_cover_equals_brute_force(solver):
+    """A target per group (a plant's organs): the fewest views meeting every group's, as a brute
+    force over all view subsets finds them; identical columns of two groups never merge."""
+    from tpvp.setcover.grouped import grouped_set_cover
+
+    rng = np.random.default_rng(5)
+    config = SetCoverConfig(solver=solver, time_limit=30.0)
+    ilp_used = 0
+    for trial in range(8):
+        a = rng.random((9, 45)) < rng.uniform(0.08, 0.3)
+        groups = rng.integers(0, 3, 45)
+        if trial % 2:
+            a[:, 5:10] = a[:, [0]]  # identical columns in several groups
+        executed = sorted(rng.choice(9, size=int(rng.integers(0, 3)), replace=False).tolist())
+        sizes = np.bincount(groups[a.any(axis=0)], minlength=3)
+        for fractions in ((1.0, 0.5, 0.0), (0.9, 0.95, 0.6), (1.0, 1.0, 1.0), (0.3, 0.0, 1.0)):
+            required = np.ceil(np.asarray(fractions) * sizes)
+            result = grouped_set_cover(sparse.csr_matrix(a), groups, required, executed=executed, config=config)
+            assert result.objective == brute_fewest_grouped(a, groups, required, executed), (trial, fractions)
+            assert result.optimal and result.reachable.all()
+            union = a[list(executed) + result.selected.tolist()].any(axis=0)
+            got = np.bincount(groups[union], minlength=3)
+            assert (got >= required).all() and np.array_equal(got, result.covered_weight)
+            assert not set(result.selected.tolist()) & set(executed)
+            ilp_used += result.solver == solver
+    assert ilp_used > 0
+    # a group asked for more than its voxels: clipped to the achievable, and said
+    result = grouped_set_cover(a, groups, [sizes[0] + 5, 0, 0], config=config)
+    assert not result.reachable[0] and result.required_weight[0] == sizes[0] and "clipped" in result.status

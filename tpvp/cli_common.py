@@ -42,7 +42,8 @@ def resolved_config(args):
                        ("scene.scale", getattr(args, "scale", None)), ("scene.radius", getattr(args, "radius", None)),
                        ("scene.up_axis", getattr(args, "up_axis", None)),
                        ("selection.coverage_target", getattr(args, "coverage_target", None)),
-                       ("selection.replan_after", getattr(args, "replan_after", None))):
+                       ("selection.replan_after", getattr(args, "replan_after", None)),
+                       ("selection.organ_targets", getattr(args, "organ_targets", None))):
         if value is not None:
             overrides[key] = value
     overrides.update(parse_overrides(args.set))
@@ -92,6 +93,11 @@ def case_options(p, output, case_options=True, frontier=True) -> None:
                             "beside the exact optimum with perfect knowledge (frontier.csv, frontier.png; "
                             "about 10-60 s more)")
     replan_option(p)
+    p.add_argument("--organ-targets", default=None, metavar="ORGAN=SHARE,...",
+                   help="the share of each organ's predicted planning voxels the plan must see, e.g. "
+                        "fruit=1.0,leaf=0.95 (organs: unknown, stem, leaf, petiole, peduncle, flower, fruit; the "
+                        "others keep --coverage-target's share); needs labelled scans (--labels) "
+                        "(selection.organ_targets)")
     p.add_argument("--view-space", default=None, type=view_space_arg, metavar="SPACE",
                    help=f"candidate views: {view_space_choices()} (default: the configuration's, hemisphere)")
     p.add_argument("--initial-view", default=None, metavar="INDEX|NAME",

@@ -34,6 +34,7 @@ from tpvp.path.tsp import TspConfig
 from tpvp.registration import EDConfig
 from tpvp.registration.methods import REGISTRATION_METHODS
 from tpvp.registration.warp_field import WarpFieldConfig
+from tpvp.scene.organs import ORGANS
 from tpvp.sensor.sensor import ROW_RANGE, SensorConfig
 from tpvp.setcover import SetCoverConfig
 from tpvp.setcover.methods import SELECTION_METHODS
@@ -192,15 +193,35 @@ class SelectionConfig:
     coverage_target: float = 1.0
     planning_miss_ratio: float | None = None
     replan_after: int = 0
+    organ_targets: str = ""
     set_cover: SetCoverConfig = field(default_factory=SetCoverConfig)
 
     def __post_init__(self):
         _positive(self, "cover_resolution")
         _integer(self, "replan_after", minimum=0)
+        self.organ_target_values()  # one line now for a malformed organ_targets, not mid-run
         if not (isinstance(self.coverage_target, (int, float)) and 0 < self.coverage_target <= 1):
             raise ConfigError(f"selection.coverage_target must be in (0, 1], got {self.coverage_target!r}")
         if self.planning_miss_ratio is not None:
             _positive(self, "planning_miss_ratio")
+
+    def organ_target_values(self) -> dict:
+        """``organ_targets`` (``"fruit=1.0,leaf=0.95"``: organ classes of
+        :data:`tpvp.scene.organs.ORGANS` and the share of each one's predicted planning voxels the
+        selection must see) as a mapping; the organs it does not name keep the planning target."""
+        values = {}
+        for item in filter(None, (part.strip() for part in str(self.organ_targets or "").split(","))):
+            name, _, value = item.partition("=")
+            name = name.strip()
+            try:
+                number = float(value)
+            except ValueError:
+                number = float("nan")
+            if name not in ORGANS or not 0 <= number <= 1:
+                raise ConfigError(f"selection.organ_targets: {item!r} is not ORGAN=SHARE with ORGAN one of "
+                                  f"{', '.join(ORGANS)} and SHARE in [0, 1] (e.g. fruit=1.0,leaf=0.95)")
+            values[name] = number
+        return values
 
     def planning_target(self, view_space: str) -> float:
         """The fraction of the *predicted planning surface* the selected views must see in

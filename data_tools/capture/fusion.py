@@ -1,10 +1,12 @@
 """Depth frames fused into one coloured surface cloud: Open3D's TSDF integration.
 
 Each frame's depth (metres, past ``max_depth`` and below the confidence floor dropped) is
-integrated with its colour at its camera-to-world pose into a scalable TSDF volume of
-``voxel_size`` voxels truncated at ``truncation``; the surface points are the volume's zero
-crossings, in metres in the capture's world frame, with their colours. :data:`SCALES` holds the
-defaults of a single plant (5 mm voxels) and of a greenhouse row (1 cm).
+integrated with its colour at its camera-to-world pose into a TSDF volume of ``voxel_size`` voxels
+truncated at ``truncation``; its zero level is extracted (:func:`surface_samples`: the voxel edges'
+crossings and its marching-cubes mesh sampled every ``spacing``); the points some frame
+measured (:func:`supported`) are the surface, in metres in the capture's world frame, with their
+colours. :data:`SCALES` holds the defaults of a single plant (5 mm voxels) and of
+a greenhouse row (1 cm).
 """
 
 from __future__ import annotations
@@ -26,15 +28,16 @@ class FusionConfig:
     """TSDF fusion options (defaults: a single plant seen from about half a metre)."""
 
     voxel_size: float = 0.005  # m
+    truncation: float = 0.01  # m: the signed distance's band, two voxels
     max_depth: float = 1.5  # m: depth farther than this is background
     min_confidence: int = 1  # ARKit's levels: 0 low, 1 medium, 2 high
     min_weight: float = 1.0  # frames (weighted) that must have seen a surface voxel to keep it
-    truncation: float = 0.01  # m: the signed distance's band, two voxels
+    spacing: float | None = 0.00125  # m: the surface mesh is sampled this far apart, a quarter voxel (None: not)
     support: float = 0.005  # m: a surface point is kept where a frame measured it within this
 
     def __post_init__(self):
-        for name in ("voxel_size", "truncation", "max_depth", "support"):
-            if not getattr(self, name) > 0:
+        for name in ("voxel_size", "truncation", "max_depth", "spacing", "support"):
+            if getattr(self, name) is not None and not getattr(self, name) > 0:
                 raise ConfigError(f"fusion: {name} must be > 0 m, got {getattr(self, name)!r}")
         if self.truncation < self.voxel_size:
             raise ConfigError(f"fusion: the truncation ({self.truncation} m) must be at least one voxel "
@@ -47,7 +50,9 @@ class FusionConfig:
 
 #: Defaults by the scale of what was captured.
 SCALES = {"plant": FusionConfig(),
-          "row": FusionConfig(voxel_size=0.01, truncation=0.02, support=0.01, max_depth=3.0)}
+          "row": FusionConfig(voxel_size=0.01, truncation=0.02, max_depth=3.0, spacing=0.005, support=0.01)}
+#: The seed of the surface sampling: the same cloud on every run.
+SAMPLING_SEED = 0
 
 
 def fusion_config(scale: str = "plant", **options) -> FusionConfig:
@@ -89,21 +94,56 @@ def fuse(capture: Capture, config: FusionConfig = FusionConfig(), progress: bool
         blocks = volume.compute_unique_block_coordinates(depth_image, intrinsic, extrinsic, 1.0, config.max_depth, band)
         volume.integrate(blocks, depth_image, colour_image, intrinsic, intrinsic, extrinsic, 1.0, config.max_depth,
                          band)
-    cloud = volume.extract_point_cloud(weight_threshold=config.min_weight)
-    points = cloud.point.positions.numpy().astype(np.float64) if "positions" in cloud.point else np.zeros((0, 3))
+    points, colours = surface_samples(volume, config)
     if len(points) == 0:
         raise PointCloudError(f"{capture.folder}: the fusion found no surface: no frame has depth within "
                               f"{config.max_depth} m at confidence {config.min_confidence} or more (--max-depth, "
                               f"--min-confidence)")
-    colours = np.clip(np.rint(cloud.point.colors.numpy() * 255.0), 0, 255).astype(np.uint8)
     poses = [frame.camera_to_world for frame in capture.frames]
     kept = supported(points, poses, measured, config.support)
     if not kept.any():
         raise PointCloudError(f"{capture.folder}: no fused surface point lies within {config.support} m of a "
                               f"measured depth (--support)")
-    # The hash map's order depends on its threads: sorted, the output is the same on every run.
     order = np.lexsort(points[kept].T[::-1])
     return points[kept][order], colours[kept][order]
+
+
+def surface_samples(volume, config: FusionConfig):
+    """``(points, colours)`` of the volume's zero level: its crossings on the voxel edges (one per
+    edge, thin parts included) and, with ``config.spacing``, points sampled uniformly (seeded) that
+    far apart over the mesh marching cubes closes, colours interpolated from its vertices: the
+    crossings alone leave the surface half a voxel apart."""
+    import open3d as o3d
+
+    crossings = volume.extract_point_cloud(weight_threshold=config.min_weight)
+    if "positions" not in crossings.point:
+        return np.zeros((0, 3)), np.zeros((0, 3), dtype=np.uint8)
+    points, colours = [crossings.point.positions.numpy().astype(np.float64)], [crossings.point.colors.numpy()]
+    mesh = (canonical_mesh(volume.extract_triangle_mesh(weight_threshold=config.min_weight).to_legacy())
+            if config.spacing else None)
+    if mesh is not None and len(mesh.triangles):
+        o3d.utility.random.seed(SAMPLING_SEED)
+        cloud = mesh.sample_points_uniformly(max(int(mesh.get_surface_area() / config.spacing**2), 1))
+        points.append(np.asarray(cloud.points, dtype=np.float64))
+        colours.append(np.asarray(cloud.colors))
+    return np.concatenate(points), np.clip(np.rint(np.concatenate(colours) * 255.0), 0, 255).astype(np.uint8)
+
+
+def canonical_mesh(mesh):
+    """The mesh with its vertices in coordinate order and its triangles in vertex order: the voxel
+    blocks' hash map orders them by its threads, and the sampling follows the triangles' order."""
+    import open3d as o3d
+
+    vertices = np.asarray(mesh.vertices)
+    order = np.lexsort(vertices.T[::-1])
+    rank = np.empty_like(order)
+    rank[order] = np.arange(len(order))
+    triangles = rank[np.asarray(mesh.triangles)]
+    triangles = triangles[np.lexsort(triangles.T[::-1])]
+    canonical = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(vertices[order]),
+                                          o3d.utility.Vector3iVector(triangles))
+    canonical.vertex_colors = o3d.utility.Vector3dVector(np.asarray(mesh.vertex_colors)[order])
+    return canonical
 
 
 def supported(points, poses, measured, tolerance: float) -> np.ndarray:

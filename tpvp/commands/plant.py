@@ -7,6 +7,7 @@ from pathlib import Path
 
 from tpvp.cli_common import case_options, print_rows, print_warnings, resolved_config
 from tpvp.experiments.frontier import coverage_frontier, write_frontier_files
+from tpvp.errors import InputFileError
 from tpvp.experiments.outputs import write_case_outputs
 from tpvp.experiments.single_plant import build_scene, run_case, transfer
 from tpvp.io import read_point_cloud
@@ -14,6 +15,7 @@ from tpvp.io.publish import staged_folder
 from tpvp.io.units import plant_size_warning
 from tpvp.pipeline.jit import compile_kernels, plant_pieces
 from tpvp.scene.normalise import check_session_pair
+from tpvp.scene.organs import LABEL_KINDS, organ_codes
 from tpvp.scene.samples import load_sample
 from tpvp.viz.background import drawing_pool
 
@@ -24,6 +26,8 @@ STAGES = ["compile", "scene", "warm-up NBV", "registration", "inflation", "visib
 def _print_case(result, summary, folder, compile_seconds, pieces):
     rows = [("views (warm-up included)", f"{result.n_views}"),
             ("coverage of the oracle set", f"{100 * result.coverage:.2f} %"),
+            *([("coverage per organ", ", ".join(f"{organ} {100 * value:.2f} %" for organ, value in
+                                                result.organ_coverage.items()))] if result.organ_coverage else []),
             ("path length", f"{result.path_length:.2f} m (planning frame; "
                             f"{summary['path_length_scan_m']:.3f} m in the scan frame)"),
             ("coverage after warm-up", f"{100 * result.coverage_warm_up:.2f} %"),
@@ -50,7 +54,8 @@ def _print_frontier(frontier) -> None:
     print(table.to_string(index=False, float_format=lambda x: f"{x:.3g}"))
 
 
-def _run_pair(previous, current, output, config, name="case", inputs=(), names=None, frontier=False):
+def _run_pair(previous, current, output, config, name="case", inputs=(), names=None, frontier=False,
+              organs=(None, None)):
     from tqdm.auto import tqdm
 
     frontier_table = None
@@ -65,7 +70,7 @@ def _run_pair(previous, current, output, config, name="case", inputs=(), names=N
         pieces = plant_pieces(config)
         compile_seconds = compile_kernels(*pieces)
         step("scene")
-        scene = build_scene(previous, current, config, **({"names": names} if names else {}))
+        scene = build_scene(previous, current, config, **({"names": names} if names else {}), organs=organs)
         shared = transfer(scene, config, progress=step)  # warm-up + registration, reused by the frontier
         result = run_case(scene, config, progress=step, transferred=shared)
         step("outputs")
@@ -99,12 +104,22 @@ def _demo(args) -> int:
                      name="tomato 03-05 -> 03-06", frontier=args.frontier)
 
 
+def _labelled_scan(path, args):
+    """``(points, units, organ codes or None)`` of a scan as ``--labels`` reads its labels."""
+    points, labels, units = read_point_cloud(path, units=args.units, return_units=True, return_labels=True,
+                                             drop_invalid=args.drop_invalid)
+    if args.labels == "none":
+        return points, units, None
+    if labels is None:
+        raise InputFileError(f"{path}: --labels {args.labels}: the scan has no label per point (a 'label' "
+                             f"property of a PLY/PCD, or a fourth column of a text file)")
+    return points, units, organ_codes(labels, args.labels)
+
+
 def _plan(args) -> int:
     config = resolved_config(args)
-    previous, previous_units = read_point_cloud(args.previous, units=args.units, return_units=True,
-                                                drop_invalid=args.drop_invalid)
-    current, current_units = read_point_cloud(args.current, units=args.units, return_units=True,
-                                              drop_invalid=args.drop_invalid)
+    previous, previous_units, previous_organs = _labelled_scan(args.previous, args)
+    current, current_units, current_organs = _labelled_scan(args.current, args)
     print(f"{args.previous.name}: units: {previous_units}; {args.current.name}: units: {current_units}")
     names = (str(args.previous), str(args.current))
     print_warnings(warning for warning in (plant_size_warning(previous, previous_units, names[0]),
@@ -112,7 +127,7 @@ def _plan(args) -> int:
     check_session_pair(previous, current, names, units=(previous_units, current_units))  # before any work
     return _run_pair(previous, current, args.output, config, name=args.current.name,
                      inputs=(args.previous, args.current), names=names,
-                     frontier=args.frontier)
+                     frontier=args.frontier, organs=(previous_organs, current_organs))
 
 
 def demo_arguments(p) -> None:
@@ -130,5 +145,9 @@ def plan_arguments(p) -> None:
                         "says which it chose (default: %(default)s)")
     p.add_argument("--drop-invalid", action="store_true",
                    help="drop points with NaN or infinite coordinates instead of refusing the scan")
+    p.add_argument("--labels", default="none", choices=["none", *LABEL_KINDS],
+                   help="what the scans' point labels mean: organ (tpvp's organ codes: a Helios dataset), "
+                        "pheno4d (0 soil, 1 stem, 2+ leaves), generated-row; with labels the results report "
+                        "coverage per organ and --organ-targets can be met (default: %(default)s)")
     case_options(p, "outputs/plan")
     p.set_defaults(func=_plan)

@@ -11,7 +11,6 @@ re-renders instantly.
 
 from __future__ import annotations
 
-import json
 import re
 from dataclasses import dataclass, replace
 from functools import lru_cache
@@ -21,7 +20,7 @@ import numpy as np
 import pandas as pd
 from scipy import sparse
 
-from tpvp.config import PlantConfig, config_yaml, make_config, with_overrides
+from tpvp.config import PlantConfig, make_config, with_overrides
 from tpvp.errors import ConfigError, InputFileError
 from tpvp.experiments.baselines import nbv_curve, optimum
 from tpvp.experiments.comparison import write_comparison_files
@@ -29,13 +28,12 @@ from tpvp.experiments import runner
 from tpvp.experiments.results import mean_std
 from tpvp.experiments.runner import Experiment, shared
 from tpvp.experiments.single_plant import added_coverage, build_scene, rank_of, run_case, transfer
-from tpvp.io import atomic_write_text, read_point_cloud
-from tpvp.io.publish import staged_folder
+from tpvp.io import read_point_cloud
 from tpvp.learning.dataset import VIEWS
 from tpvp.learning.methods import learned_one_shot
 from tpvp.metrics import chamfer_distance
-from tpvp.provenance import provenance
 from tpvp.registry import Registry
+from tpvp.scene.organs import LABEL_KINDS, organ_codes, part_organ_codes
 from tpvp.scene.samples import load_sample
 from tpvp.setcover.partial import partial_set_cover
 from tpvp.synthetic.plants import generate_session_pair
@@ -67,6 +65,32 @@ class Instance:
 
     def load(self) -> tuple[np.ndarray, np.ndarray]:
         return _load_instance(self)
+
+    def organs(self) -> tuple:
+        """The organ codes (:mod:`tpvp.scene.organs`) of both sessions' points, or ``(None, None)``:
+        a generated pair's parts, a dataset's labels as its manifest's ``label_kind`` says."""
+        return _instance_organs(self)
+
+
+@lru_cache(maxsize=4)
+def _instance_organs(instance: Instance) -> tuple:
+    if instance.source == "generated":
+        pair = generate_session_pair(instance.species, instance.seed, days=2.0)
+        return tuple(part_organ_codes(s.part_kinds, s.part) for s in (pair.previous, pair.current))
+    if instance.source != "dataset":
+        return None, None
+    files = [Path(instance.previous_file), Path(instance.current_file)]
+    manifest = files[0].parent.parent / "manifest.csv"
+    kind = "none"
+    if manifest.is_file():
+        table = pd.read_csv(manifest)
+        if "label_kind" in table.columns:
+            kinds = table.loc[table["file"] == f"{files[0].parent.name}/{files[0].name}", "label_kind"]
+            kind = str(kinds.iloc[0]) if len(kinds) and isinstance(kinds.iloc[0], str) else "none"
+    if kind not in LABEL_KINDS:
+        return None, None
+    labels = [read_point_cloud(f, units="m", return_labels=True)[1] for f in files]
+    return tuple(None if lab is None else organ_codes(lab, kind) for lab in labels)
 
 
 @lru_cache(maxsize=4)
@@ -204,6 +228,7 @@ def warm_up_rank(scene, executed) -> dict:
 
 def _case_row(result, scene, config) -> dict:
     return {"views": result.n_views, "coverage": result.coverage, "path_length_m": result.path_length,
+            **{f"coverage_{organ}": value for organ, value in result.organ_coverage.items()},
             "coverage_after_warm_up": result.coverage_warm_up, **warm_up_rank(scene, result.executed_views),
             **_optimum_for_coverage(scene, result, config),
             "chamfer_before_mm": 1e3 * result.chamfer_before, "chamfer_after_mm": 1e3 * result.chamfer_after,
@@ -308,7 +333,8 @@ PLANT_METHODS.register("ma-scvp-oracle", "MA-SCVP's pipeline with the exact set 
 def _scene(case_without_view: Case, config: PlantConfig):
     previous, current = case_without_view.instance.load()
     return build_scene(previous, current, config, names=(f"{case_without_view.instance.name} previous",
-                                                         f"{case_without_view.instance.name} current"))
+                                                         f"{case_without_view.instance.name} current"),
+                       organs=case_without_view.instance.organs())
 
 
 def case_scene(case: Case, case_config: PlantConfig, cache_dir=None):

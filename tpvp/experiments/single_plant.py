@@ -19,6 +19,7 @@ from tpvp.nbv.warm_up import start_nbv, warm_up
 from tpvp.pipeline.plant import CaseResult, Known, PlanningSurface, Transfer, plan, planning_surface
 from tpvp.pipeline.plant import transfer as transfer_known
 from tpvp.pipeline.replan import prediction_of, replan
+from tpvp.scene.organs import CODE, ORGANS
 from tpvp.scene.simulator import Scene, build_scene, observation  # noqa: F401 (callers build the case's scene here)
 from tpvp.visibility import coverage_ratio, covered_voxels
 
@@ -26,7 +27,7 @@ from tpvp.visibility import coverage_ratio, covered_voxels
 def known(scene: Scene) -> Known:
     """What the robot knows of a simulated case before it plans: the scene without its ground truth."""
     return Known(scene.previous, scene.view_space, scene.sensor, scene.plant_from_scan, scene.table_points,
-                 scene.names, scene.reduction or {})
+                 scene.names, scene.reduction or {}, scene.previous_organs)
 
 
 def added_coverage(scene, executed) -> np.ndarray:
@@ -70,9 +71,20 @@ def run_case(scene: Scene, config: PlantConfig = PlantConfig(), progress=None,
     if config.selection.replan_after:
         result = execute_replanning(scene, config, transferred, result, surface, progress)
     executed, planned = result.executed_views, result.planned_views
-    return replace(result, coverage=coverage_ratio(covered_voxels(scene.truth_visibility, executed + planned),
-                                                   scene.oracle),
-                   coverage_warm_up=coverage_ratio(covered_voxels(scene.truth_visibility, executed), scene.oracle))
+    covered = covered_voxels(scene.truth_visibility, executed + planned)
+    return replace(result, coverage=coverage_ratio(covered, scene.oracle),
+                   coverage_warm_up=coverage_ratio(covered_voxels(scene.truth_visibility, executed), scene.oracle),
+                   organ_coverage=organ_coverage(scene, covered))
+
+
+def organ_coverage(scene: Scene, covered) -> dict:
+    """Organ -> the true coverage of its oracle voxels (those some candidate view sees); empty when
+    today's scan is not labelled."""
+    if scene.voxel_organs is None:
+        return {}
+    organs = scene.voxel_organs[scene.oracle]
+    return {ORGANS[code]: coverage_ratio(covered, scene.oracle[organs == code])
+            for code in np.unique(organs) if code != CODE["unknown"]}
 
 
 def execute_replanning(scene: Scene, config: PlantConfig, transferred: Transfer, result: CaseResult,

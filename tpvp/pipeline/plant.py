@@ -15,8 +15,10 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy import sparse
 
 from tpvp.config import PlantConfig
+from tpvp.errors import ConfigError
 from tpvp.inflation import inflate
 from tpvp.inflation.weights import surface_area, surface_classes, surface_weights
 from tpvp.path.local import predicted_size
@@ -25,6 +27,7 @@ from tpvp.pipeline.result import PlanResult
 from tpvp.pipeline.surface import planning_visibility
 from tpvp.pipeline.timing import timed
 from tpvp.registration.methods import register
+from tpvp.scene.organs import CODE, ORGANS, voxel_organs
 from tpvp.setcover.methods import SelectionProblem, select_views
 
 
@@ -46,6 +49,7 @@ class Known:
     table_points: np.ndarray
     names: tuple  # (previous session, today's session) as the user named them
     reduction: dict = field(default_factory=dict)
+    previous_organs: np.ndarray | None = None  # organ code of each previous point (tpvp.scene.organs), if labelled
 
     @property
     def scan_scale(self) -> float:
@@ -76,6 +80,8 @@ class CaseResult(PlanResult):
     obstacle: tuple  # (centre, radius) of the path's collision sphere
     planning_target: float = 1.0  # fraction of the planning surface the selection had to see
     replans: tuple = ()  # tpvp.pipeline.replan.Replan rows, in order (selection.replan_after)
+    planning_organs: dict = field(default_factory=dict)  # organ -> share of its predicted voxels the plan sees
+    organ_coverage: dict = field(default_factory=dict)  # organ -> true coverage (the simulation measures it)
 
     @property
     def order(self) -> list:
@@ -95,10 +101,10 @@ class CaseResult(PlanResult):
                       "set_cover_gap": details.gap, "set_cover_optimal": details.optimal}
             if hasattr(details, "n_dropped_infeasible"):  # full set cover
                 solver["set_cover_dropped_voxels"] = details.n_dropped_infeasible
-            else:  # partial set cover (a coverage target below 1)
-                solver.update(set_cover_required_weight=details.required_weight,
-                              set_cover_covered_weight=details.covered_weight,
-                              set_cover_achievable_weight=details.achievable_weight)
+            else:  # partial set cover (a coverage target below 1, or one per organ: summed)
+                solver.update(set_cover_required_weight=float(np.sum(details.required_weight)),
+                              set_cover_covered_weight=float(np.sum(details.covered_weight)),
+                              set_cover_achievable_weight=float(np.sum(details.achievable_weight)))
         return {
             **self.headline(),
             "warm_up_views": len(self.executed_views), "planned_views": len(self.planned_views),
@@ -107,6 +113,8 @@ class CaseResult(PlanResult):
             "chamfer_before_mm": 1e3 * self.chamfer_before, "chamfer_after_mm": 1e3 * self.chamfer_after,
             **self.selection_summary(), **solver, "tsp_optimal": self.tsp.optimal, "tsp_method": self.tsp.method,
             "warnings": " | ".join(self.warnings),
+            **{f"coverage_{organ}": value for organ, value in self.organ_coverage.items()},
+            **{f"planning_coverage_{organ}": value for organ, value in self.planning_organs.items()},
             **({"replans": len(self.replans), "views_added_by_replanning": sum(r.views_added for r in self.replans),
                 "views_dropped_by_replanning": sum(r.views_dropped for r in self.replans)} if self.replans else {}),
             **{f"seconds_{k}": v for k, v in self.timings.items()},
@@ -149,6 +157,7 @@ class PlanningSurface:
     classes: np.ndarray | None  # None unless config.surface_weights.enabled
     area: np.ndarray | None
     timings: dict
+    organs: np.ndarray | None = None  # organ code of each planning voxel, when the previous model is labelled
 
 
 def planning_surface(known: Known, config: PlantConfig, transferred: Transfer, progress=None) -> PlanningSurface:
@@ -169,7 +178,11 @@ def planning_surface(known: Known, config: PlantConfig, transferred: Transfer, p
             classes = surface_classes(grid.keys, resolution, warped, coarse,
                                       config.surface_weights.near_voxels * resolution)
             area = surface_area(grid.keys, resolution, inflated.planning) if config.surface_weights.area else None
-    return PlanningSurface(inflated, grid, visibility, classes, area, timings)
+        # The previous model's labels follow the registration (a method that warps it point by
+        # point); voxels of growth or of today's captures alone hold no labelled point: unknown.
+        labelled = known.previous_organs is not None and len(known.previous_organs) == len(warped)
+        organs = voxel_organs(grid.keys, resolution, warped, known.previous_organs) if labelled else None
+    return PlanningSurface(inflated, grid, visibility, classes, area, timings, organs)
 
 
 def selection_problem(known: Known, config: PlantConfig, transferred: Transfer,
@@ -180,9 +193,25 @@ def selection_problem(known: Known, config: PlantConfig, transferred: Transfer,
     weights = None
     if selection.coverage_target < 1.0 and config.surface_weights.enabled:
         weights = surface_weights(surface.classes, config.surface_weights, surface.area)
+    target = selection.planning_target(config.view_space)
+    targets = selection.organ_target_values()
+    groups = organ_groups(surface.organs, targets, target, known.names[0]) if targets else None
     return SelectionProblem(surface.visibility, tuple(transferred.executed), known.view_space,
-                            surface.grid.centres, selection.planning_target(config.view_space),
-                            voxel_weights=weights, nbv=transferred.nbv)
+                            surface.grid.centres, target, voxel_weights=weights, nbv=transferred.nbv,
+                            voxel_groups=groups and groups[0], group_targets=groups and groups[1])
+
+
+def organ_groups(organs, targets: dict, planning_target: float, name: str):
+    """``(group of each planning voxel, each group's share)`` for per-organ targets: one group per
+    organ named in ``targets``, one for every other voxel (``planning_target``). Targets without organ labels are one clear error."""
+    if organs is None:
+        raise ConfigError(f"organ targets ({', '.join(targets)}) need the previous model's organ labels: {name} "
+                          f"has none (give a labelled scan and --labels organ|pheno4d)")
+    named = [CODE[organ] for organ in targets]
+    groups = np.full(len(organs), len(named), dtype=np.int64)
+    for group, code in enumerate(named):
+        groups[organs == code] = group
+    return groups, (*targets.values(), planning_target)
 
 
 def plan(known: Known, config: PlantConfig, transferred: Transfer, progress=None,
@@ -217,7 +246,22 @@ def plan(known: Known, config: PlantConfig, transferred: Transfer, progress=None
                 "warped": alignment.warped, "inflation": surface.inflated.inflation,
                 "planning": surface.inflated.planning},
         obstacle=(centre, radius), warnings=warnings, planning_target=problem.planning_target,
+        planning_organs=planning_organ_shares(problem, selection, surface.organs),
     )
+
+
+def planning_organ_shares(problem, selection, organs) -> dict:
+    """Organ -> the share of its predicted planning voxels (coverable by some view) the executed
+    and selected views see; empty without organ labels."""
+    if organs is None:
+        return {}
+    matrix = sparse.csr_matrix(problem.visibility)
+    coverable = np.zeros(matrix.shape[1], dtype=bool)
+    coverable[matrix.indices] = True
+    seen = np.zeros(matrix.shape[1], dtype=bool)
+    seen[matrix[list(problem.executed) + list(selection.selected)].indices] = True
+    return {ORGANS[code]: float(seen[coverable & (organs == code)].mean())
+            for code in np.unique(organs[coverable])}
 
 
 def _registration_warnings(known: Known, alignment, config: PlantConfig) -> list:

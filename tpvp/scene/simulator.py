@@ -12,6 +12,7 @@ import numpy as np
 
 from tpvp.errors import ConfigError, PointCloudError, checked_cloud
 from tpvp.scene import voxels
+from tpvp.scene.organs import voxel_organs
 from tpvp.scene.grid import plant_grid
 from tpvp.scene.normalise import check_session_pair, normalise_plant, up_rotation
 from tpvp.viewspace import get_view_space
@@ -40,6 +41,8 @@ class Scene:
     table_points: np.ndarray
     names: tuple = ("previous-session scan", "current-session scan")
     reduction: dict | None = None  # points in and used per scan, reduction voxel
+    previous_organs: np.ndarray | None = None  # organ code of each point of ``previous`` (tpvp.scene.organs)
+    voxel_organs: np.ndarray | None = None  # organ code of each ground-truth voxel of ``grid``
 
     @property
     def views(self) -> np.ndarray:
@@ -102,14 +105,16 @@ def planning_frame(reference_scan, config, name: str = "reference scan") -> Plan
 
 
 def build_scene(previous_points, current_points, config,
-                names=("previous-session scan", "current-session scan")) -> Scene:
+                names=("previous-session scan", "current-session scan"), organs=(None, None)) -> Scene:
     """Bring both sessions into the planning frame (defined by the current session, or by the
     previous one with ``scene.frame = previous``; the plant stays in place between sessions) and
     render the ground truth from every candidate view.
 
     ``names`` (e.g. the files) name the scans in errors. Scans of more than
     ``scene.reduce_above`` points are reduced to voxel centroids at ``scene.reduce_resolution``;
-    the ground truth is built from every point of the current scan, so it does not change."""
+    the ground truth is built from every point of the current scan, so it does not change.
+    ``organs``: the organ codes (:mod:`tpvp.scene.organs`) of the previous and of the current
+    scan's points, or None; they label the (reduced) previous points and the ground-truth voxels."""
     up = up_rotation(config.scene.up_axis)
     current_scan, previous_scan = (checked_cloud(points, name) for points, name in
                                    ((current_points, names[1]), (previous_points, names[0])))
@@ -122,7 +127,9 @@ def build_scene(previous_points, current_points, config,
     space, sensor, current = frame.view_space, frame.sensor, frame.reference
     current_points = frame.to_planning(current_scan) if by_previous else current.points
     grid = plant_grid(current_points, current.table_points, config.gt_resolution)
+    current_labelled = current_points
     previous = current.points if by_previous else frame.to_planning(previous_scan)
+    labelled_previous = previous
     del previous_scan, current_scan
     reduction = {"resolution_m": config.scene.reduce_resolution, "previous_points": len(previous),
                  "current_points": len(current_points)}
@@ -131,6 +138,7 @@ def build_scene(previous_points, current_points, config,
                                 if len(p) > config.scene.reduce_above else p
                                 for p in (previous, current_points))
     reduction.update(previous_points_used=len(previous), current_points_used=len(current_points))
+    previous_organs, grid_organs = _organs(organs, previous, labelled_previous, grid, current_labelled, config, names)
     for name, points, count in ((names[0], previous, None), (names[1], current_points, int(grid.countable.sum()))):
         count = len(voxels.voxelise(points, config.gt_resolution)) if count is None else count
         if count < config.scene.min_plant_voxels:
@@ -143,7 +151,23 @@ def build_scene(previous_points, current_points, config,
     if len(oracle) == 0:
         raise ConfigError(_unseen(config, space, sensor, current.scale if config.scene.scale == "native" else 1.0))
     return Scene(previous, current_points, grid, space, sensor, truth, oracle, frame.plant_from_scan,
-                 current.table_points, names, reduction)
+                 current.table_points, names, reduction, previous_organs, grid_organs)
+
+
+def _organs(organs, previous, labelled_previous, grid, labelled_current, config, names):
+    """(organ code of each used previous point, of each ground-truth voxel), each None without its
+    labels: a reduced point takes its voxel's majority, a ground-truth voxel its points'."""
+    previous_codes, current_codes = organs
+    for codes, points, which in ((previous_codes, labelled_previous, 0), (current_codes, labelled_current, 1)):
+        if codes is not None and len(codes) != len(points):
+            raise ConfigError(f"{names[which]}: {len(codes)} organ labels for its {len(points)} points")
+    if previous_codes is not None and len(previous) != len(labelled_previous):
+        resolution = config.scene.reduce_resolution
+        previous_codes = voxel_organs(voxels.voxel_keys(previous, resolution), resolution, labelled_previous,
+                                      previous_codes)
+    if current_codes is not None:
+        current_codes = voxel_organs(grid.keys, config.gt_resolution, labelled_current, current_codes)
+    return previous_codes, current_codes
 
 
 def _unseen(config, space, sensor, per_metre: float) -> str:

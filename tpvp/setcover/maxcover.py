@@ -86,11 +86,13 @@ def _check_k(k) -> int:
     return int(k)
 
 
-def _classes(columns: sparse.csc_matrix, weights: np.ndarray):
-    """Merge identical columns of ``columns`` (views x voxels, bool CSC).
+def _classes(columns: sparse.csc_matrix, weights: np.ndarray, groups: np.ndarray | None = None):
+    """Merge identical columns of ``columns`` (views x voxels, bool CSC), within a group when
+    ``groups`` (one index per voxel) is given.
 
-    Returns ``(members, class_weights)``: ``members`` (classes, views) bool CSR, one row per
-    distinct view set, and the summed weights of each class.
+    Returns ``(members, class_weights, class_groups)``: ``members`` (classes, views) bool CSR, one
+    row per distinct view set (and group), the summed weights of each class, and its group (None
+    without ``groups``).
     """
     n_views, n_voxels = columns.shape
     packed = []
@@ -98,10 +100,13 @@ def _classes(columns: sparse.csc_matrix, weights: np.ndarray):
         block = columns[:, start:start + _PACK_CHUNK].T.toarray()
         packed.append(np.packbits(block, axis=1))
     packed = np.concatenate(packed) if packed else np.zeros((0, (n_views + 7) // 8), dtype=np.uint8)
-    unique, inverse = np.unique(packed, axis=0, return_inverse=True)
-    members = np.unpackbits(unique, axis=1, count=n_views).astype(bool)
+    if groups is not None:  # the group's index as 8 more bytes of the key
+        packed = np.hstack([packed, np.asarray(groups, dtype=">i8").reshape(-1, 1).view(np.uint8)])
+    unique, first, inverse = np.unique(packed, axis=0, return_index=True, return_inverse=True)
+    members = np.unpackbits(unique[:, :(n_views + 7) // 8], axis=1, count=n_views).astype(bool)
     class_weights = np.bincount(inverse.reshape(-1), weights=weights, minlength=unique.shape[0])
-    return sparse.csr_matrix(members), class_weights
+    class_groups = None if groups is None else np.asarray(groups, dtype=np.int64)[first]
+    return sparse.csr_matrix(members), class_weights, class_groups
 
 
 @dataclass(frozen=True, eq=False)
@@ -118,10 +123,12 @@ class ReducedCoverage:
     members: sparse.csr_matrix  # (classes, useful views) bool
     class_weights: np.ndarray
     columns: np.ndarray  # view index of each useful view (column of members)
+    class_groups: np.ndarray | None = None  # the group of each class (reduce_coverage's ``groups``)
 
 
-def reduce_coverage(visibility, executed=(), weights=None) -> ReducedCoverage:
-    """Apply the reductions shared by max coverage and partial set cover (module docstring)."""
+def reduce_coverage(visibility, executed=(), weights=None, groups=None) -> ReducedCoverage:
+    """Apply the reductions shared by max coverage and partial set cover (module docstring);
+    ``groups`` (one index per voxel): classes never merge voxels of two groups."""
     a = _as_visibility(visibility)
     n_views, n_voxels = a.shape
     w, integral = _as_weights(weights, n_voxels)
@@ -135,12 +142,13 @@ def reduce_coverage(visibility, executed=(), weights=None) -> ReducedCoverage:
     seen = np.zeros(n_voxels, dtype=bool)
     seen[a_allowed.indices] = True
     remaining = seen & ~covered
-    members, class_weights = _classes(sparse.csc_matrix(a_allowed[:, remaining]), w[remaining])
+    members, class_weights, class_groups = _classes(sparse.csc_matrix(a_allowed[:, remaining]), w[remaining],
+                                                    None if groups is None else np.asarray(groups)[remaining])
     useful = np.flatnonzero(np.diff(sparse.csc_matrix(members).indptr) > 0)
     members = sparse.csr_matrix(members[:, useful])
     members.sort_indices()
     return ReducedCoverage(a, w, integral, covered, seen, float(w[covered].sum()), members, class_weights,
-                           allowed_ids[useful])
+                           allowed_ids[useful], class_groups)
 
 
 def _greedy(members: sparse.csr_matrix, weights: np.ndarray, k: int) -> np.ndarray:

@@ -19,6 +19,7 @@ import numpy as np
 from scipy import sparse
 
 from tpvp.registry import Registry
+from tpvp.setcover.grouped import grouped_set_cover
 from tpvp.setcover.ilp import solve_set_cover
 from tpvp.setcover.partial import partial_set_cover
 
@@ -42,6 +43,8 @@ class SelectionProblem:
     planning_target: float = 1.0
     voxel_weights: np.ndarray | None = None
     nbv: object = None
+    voxel_groups: np.ndarray | None = None  # a group per planning voxel (its organ), with a share each:
+    group_targets: tuple | None = None  # the selection must see that share of every group's voxels
 
 
 @dataclass(frozen=True, eq=False)
@@ -65,6 +68,8 @@ def set_cover(problem: SelectionProblem, config) -> Selection:
     planning voxels (or that share of the voxel weights), executed views included (exact partial
     set-cover ILP, :func:`tpvp.setcover.partial.partial_set_cover`)."""
     t0 = time.perf_counter()
+    if problem.voxel_groups is not None:
+        return _grouped_cover(problem, config, t0)
     if problem.planning_target >= 1.0:
         result = solve_set_cover(problem.visibility, executed=problem.executed, config=config.set_cover)
         return Selection(result.selected, result.optimal, result.status, time.perf_counter() - t0, result)
@@ -75,6 +80,23 @@ def set_cover(problem: SelectionProblem, config) -> Selection:
     status = (f"{result.status}; {100 * result.covered_weight / total:.2f} % of the coverable planning surface"
               if total else result.status)
     return Selection(result.selected, result.optimal, status, time.perf_counter() - t0, result)
+
+
+def _grouped_cover(problem: SelectionProblem, config, t0: float) -> Selection:
+    """A share of every group's coverable voxels (weights), the fewest views (exact ILP,
+    :func:`tpvp.setcover.grouped.grouped_set_cover`)."""
+    matrix, weights, coverable, _ = cover_requirement(problem)
+    groups = np.asarray(problem.voxel_groups, dtype=np.int64)
+    shares = np.asarray(problem.group_targets, dtype=np.float64)
+    totals = np.bincount(groups[coverable], weights=weights[coverable], minlength=len(shares))
+    required = shares * totals
+    if problem.voxel_weights is None:  # whole voxels
+        required = np.ceil(required - 1e-9)
+    result = grouped_set_cover(matrix, groups, required, executed=problem.executed, config=config.set_cover,
+                               weights=problem.voxel_weights)
+    got = ", ".join(f"{100 * c / t:.2f} %" for c, t in zip(result.covered_weight, totals) if t)
+    return Selection(result.selected, result.optimal, f"{result.status}; per group {got}", time.perf_counter() - t0,
+                     result)
 
 
 def cover_requirement(problem: SelectionProblem):

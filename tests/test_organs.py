@@ -1,0 +1,101 @@
+"""Organ labels through the plant pipeline: each source's labels as organ codes, voxel labels
+against a brute force, the previous model's labels following the registration onto the planning
+voxels, per-organ targets met on the predicted surface, per-organ true coverage, and the lines
+users see when the labels are missing or the targets malformed."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from tpvp.cli import main
+from tpvp.config import make_config
+from tpvp.errors import ConfigError
+from tpvp.experiments.single_plant import build_scene, run_case
+from tpvp.io import write_point_cloud
+from tpvp.scene import voxels
+from tpvp.scene.organs import CODE, ORGANS, organ_codes, part_organ_codes, voxel_organs
+from tpvp.synthetic.plants import generate_session_pair
+
+
+def test_every_source_s_labels_become_organ_codes():
+    np.testing.assert_array_equal(organ_codes([0, 1, 2, 7], "pheno4d"),
+                                  [CODE["unknown"], CODE["stem"], CODE["leaf"], CODE["leaf"]])
+    np.testing.assert_array_equal(organ_codes([0, 1, 2, 3, 9], "generated-row"),
+                                  [CODE["stem"], CODE["leaf"], CODE["fruit"], CODE["petiole"], CODE["unknown"]])
+    np.testing.assert_array_equal(organ_codes([6, 2, -1, 40], "organ"), [6, 2, 0, 0])
+    with pytest.raises(ConfigError, match="unknown label kind"):
+        organ_codes([1], "helios")
+
+
+def test_voxel_organs_are_the_majority_of_their_points():
+    rng = np.random.default_rng(2)
+    points = rng.uniform(0, 0.05, (3000, 3))
+    organs = rng.integers(0, len(ORGANS), len(points))
+    resolution = 0.01
+    keys = np.concatenate([voxels.voxelise(points, resolution), [[50, 50, 50]]])  # a voxel without points
+    got = voxel_organs(keys, resolution, points, organs)
+    point_keys = voxels.voxel_keys(points, resolution)
+    for key, code in zip(keys, got):
+        inside = organs[(point_keys == key).all(axis=1)]
+        expected = np.argmax(np.bincount(inside, minlength=len(ORGANS))) if len(inside) else CODE["unknown"]
+        assert code == expected
+
+
+@pytest.fixture(scope="module")
+def labelled_scene():
+    pair = generate_session_pair("tomato", 1)
+    organs = tuple(part_organ_codes(s.part_kinds, s.part) for s in (pair.previous, pair.current))
+    return build_scene(pair.previous.points, pair.current.points, make_config("plant"), organs=organs), pair, organs
+
+
+def test_a_scene_carries_the_labels_of_both_sessions(labelled_scene):
+    scene, pair, (_, current_organs) = labelled_scene
+    assert scene.previous_organs.shape == (len(scene.previous),)
+    assert set(np.unique(scene.previous_organs)) == {CODE["stem"], CODE["leaf"], CODE["petiole"]}
+    # every ground-truth voxel holding plant points carries their majority organ; the table none
+    planning = scene.current
+    config = make_config("plant")
+    np.testing.assert_array_equal(scene.voxel_organs, voxel_organs(scene.grid.keys, config.gt_resolution, planning,
+                                                                    current_organs))
+    assert (scene.voxel_organs[scene.grid.countable] != CODE["unknown"]).mean() > 0.99
+
+
+def test_organ_targets_are_met_on_the_predicted_surface_with_fewer_views(labelled_scene):
+    scene, _, _ = labelled_scene
+    config = make_config("plant")
+    full = run_case(scene, config)
+    targeted = run_case(scene, replace(config, selection=replace(config.selection, organ_targets="leaf=0.9")))
+    assert targeted.planning_organs["leaf"] >= 0.9 and targeted.planning_organs["stem"] == 1.0
+    assert targeted.n_views < full.n_views
+    assert set(full.organ_coverage) == {"stem", "leaf", "petiole"} and all(0 < v <= 1 for v in
+                                                                            full.organ_coverage.values())
+    row = targeted.summary()
+    assert row["coverage_leaf"] == targeted.organ_coverage["leaf"] and "planning_coverage_leaf" in row
+
+
+def test_organ_targets_without_labels_are_one_line(labelled_scene):
+    scene, _, _ = labelled_scene
+    config = make_config("plant")
+    unlabelled = replace(scene, previous_organs=None, voxel_organs=None)
+    with pytest.raises(ConfigError, match="need the previous model's organ labels"):
+        run_case(unlabelled, replace(config, selection=replace(config.selection, organ_targets="fruit=1")))
+    with pytest.raises(ConfigError, match="ORGAN=SHARE"):
+        replace(config.selection, organ_targets="fruits=1")
+
+
+def test_plan_reads_labels_and_reports_coverage_per_organ(labelled_scene, tmp_path, capsys):
+    _, pair, (previous_organs, current_organs) = labelled_scene
+    previous = write_point_cloud(tmp_path / "previous.ply", pair.previous.points, labels=previous_organs)
+    current = write_point_cloud(tmp_path / "current.ply", pair.current.points, labels=current_organs)
+    base = ["plan", "--previous", previous, "--current", current, "--units", "m"]
+    assert main([*map(str, base), "--organ-targets", "leaf=0.95", "--output", str(tmp_path / "no_labels")]) == 2
+    assert "need the previous model's organ labels" in capsys.readouterr().err
+    assert not (tmp_path / "no_labels").exists()
+    assert main([*map(str, base), "--labels", "organ", "--organ-targets", "leaf=0.95",
+                 "--output", str(tmp_path / "plan")]) == 0
+    row = pd.read_csv(tmp_path / "plan" / "results.csv").iloc[0]
+    assert row["planning_coverage_leaf"] >= 0.95 and 0 < row["coverage_leaf"] <= 1

@@ -1,0 +1,68 @@
+"""Organ classes of a plant's points: one code per class, and each data source's labels as codes.
+
+A point cloud's integer labels mean what its source says: Pheno4D's annotations (0 soil, 1 stem,
+2+ one per leaf), the generated plants' parts, the generated rows' classes, Helios' organs. The
+planner reports coverage per organ class (:data:`ORGANS`), so every source's labels are turned
+into these codes once, when read (:func:`organ_codes`). ``unknown`` is what a voxel without a
+labelled point holds (the inflation's growth voxels, a capture).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from tpvp.errors import ConfigError
+from tpvp.scene import voxels
+
+#: The organ classes, their codes being their positions.
+ORGANS = ("unknown", "stem", "leaf", "petiole", "peduncle", "flower", "fruit")
+CODE = {name: code for code, name in enumerate(ORGANS)}
+#: What a source's labels mean -> its label -> organ class (``None``: a rule, see :func:`organ_codes`).
+LABEL_KINDS = {
+    "organ": None,  # the labels are organ codes already (a Helios dataset, tpvp's own files)
+    "pheno4d": None,  # 0 soil, 1 stem, 2+ a leaf each
+    "generated-row": {0: "stem", 1: "leaf", 2: "fruit", 3: "petiole"},  # tpvp.synthetic.greenhouse
+}
+
+
+def organ_codes(labels, kind: str) -> np.ndarray:
+    """The organ code of every label of a source of ``kind`` (:data:`LABEL_KINDS`); labels it
+    does not name are ``unknown``."""
+    labels = np.asarray(labels, dtype=np.int64)
+    if kind not in LABEL_KINDS:
+        raise ConfigError(f"unknown label kind {kind!r}; choose one of {', '.join(LABEL_KINDS)}")
+    if kind == "organ":
+        return np.where((labels >= 0) & (labels < len(ORGANS)), labels, CODE["unknown"])
+    if kind == "pheno4d":
+        return np.select([labels == 1, labels >= 2], [CODE["stem"], CODE["leaf"]], CODE["unknown"])
+    codes = np.full(len(labels), CODE["unknown"], dtype=np.int64)
+    for label, organ in LABEL_KINDS[kind].items():
+        codes[labels == label] = CODE[organ]
+    return codes
+
+
+def part_organ_codes(part_kinds, parts) -> np.ndarray:
+    """A generated plant's points (:class:`tpvp.synthetic.plants.PlantSample`: the kind of every
+    part, ``stem`` / ``petiole`` / ``blade``, and each point's part) as organ codes."""
+    by_kind = {"stem": CODE["stem"], "petiole": CODE["petiole"], "blade": CODE["leaf"]}
+    return np.array([by_kind[kind] for kind in part_kinds], dtype=np.int64)[np.asarray(parts)]
+
+
+def voxel_organs(keys, resolution: float, points, organs) -> np.ndarray:
+    """The organ code of each voxel ``keys`` (``(n, 3)`` at ``resolution``): the most frequent
+    among the labelled ``points`` in it (the lowest code on ties), ``unknown`` where none lies."""
+    keys = np.asarray(keys, dtype=np.int64).reshape(-1, 3)
+    result = np.full(len(keys), CODE["unknown"], dtype=np.int64)
+    if len(keys) == 0 or len(points) == 0:
+        return result
+    codes = voxels.encode_keys(keys)
+    order = np.argsort(codes)
+    point_codes = voxels.encode_keys(voxels.voxel_keys(points, resolution))
+    slot = np.searchsorted(codes[order], point_codes)
+    inside = slot < len(codes)
+    inside[inside] = codes[order][slot[inside]] == point_codes[inside]
+    votes = np.zeros((len(keys), len(ORGANS)), dtype=np.int64)
+    np.add.at(votes, (order[slot[inside]], np.asarray(organs, dtype=np.int64)[inside]), 1)
+    labelled = votes.sum(axis=1) > 0
+    result[labelled] = np.argmax(votes[labelled], axis=1)
+    return result
