@@ -75,8 +75,8 @@ def cases(dataset: Path | None) -> list:
     instances = plants.generated_instances(seeds=(0, 1, 2)) + [plants.bundled_instance()]
     if dataset is not None:
         table = plants.dataset_table(dataset)
-        first = table.groupby("plant", sort=True).head(1).index.tolist()  # one pair per plant
-        instances += plants.dataset_instances(dataset, pairs=first)
+        last = table.groupby("plant", sort=True).tail(1).index.tolist()  # one pair per plant: its latest (fruit)
+        instances += plants.dataset_instances(dataset, pairs=last)
     return plants.case_list(instances, view_spaces=VIEW_SPACES, rotations=(0.0,), initial_views=(17,))
 
 

@@ -99,3 +99,28 @@ def test_plan_reads_labels_and_reports_coverage_per_organ(labelled_scene, tmp_pa
                  "--output", str(tmp_path / "plan")]) == 0
     row = pd.read_csv(tmp_path / "plan" / "results.csv").iloc[0]
     assert row["planning_coverage_leaf"] >= 0.95 and 0 < row["coverage_leaf"] <= 1
+
+
+def test_a_labelled_session_plans_the_organ_targets_as_the_simulator(labelled_scene, tmp_path):
+    """A real session started with the previous model's organ labels plans per-organ targets from
+    its captures exactly as the simulator does."""
+    from tpvp.experiments.standin import StandInCamera
+    from tpvp.session import Session
+
+    _, pair, organs = labelled_scene
+    config = make_config("plant", {"view_space": "sphere", "selection.organ_targets": "leaf=0.9,petiole=0.8"})
+    camera = StandInCamera(pair.previous.points, pair.current.points, config, organs=organs)
+    simulated = run_case(camera.scene, camera.config)
+    session = Session.start(tmp_path / "session", pair.previous.points, config, "previous", previous_organs=organs[0])
+    while (request := session.request()).view is not None:
+        session.add(camera.cloud(request.view), request.view, f"view {request.view}")
+    planned = Session.open(tmp_path / "session").plan()
+    assert planned.planned_views == simulated.planned_views and planned.planning_organs == simulated.planning_organs
+    assert planned.planning_organs["leaf"] >= 0.9 and planned.planning_organs["petiole"] >= 0.8
+
+
+def test_organ_targets_hold_through_re_planning(labelled_scene):
+    scene, _, _ = labelled_scene
+    config = make_config("plant", {"selection.organ_targets": "leaf=0.9", "selection.replan_after": 2})
+    result = run_case(scene, config)
+    assert result.replans and result.planning_organs["leaf"] >= 0.9 and result.planning_organs["stem"] == 1.0

@@ -33,7 +33,7 @@ from tpvp.learning.dataset import VIEWS
 from tpvp.learning.methods import learned_one_shot
 from tpvp.metrics import chamfer_distance
 from tpvp.registry import Registry
-from tpvp.scene.organs import LABEL_KINDS, organ_codes, part_organ_codes
+from tpvp.scene.organs import LABEL_KINDS, ORGANS, organ_codes, part_organ_codes
 from tpvp.scene.samples import load_sample
 from tpvp.setcover.partial import partial_set_cover
 from tpvp.synthetic.plants import generate_session_pair
@@ -392,7 +392,10 @@ def tables(raw: pd.DataFrame) -> dict:
         pending.groupby(["source", "view_space", "method", "status"]).size().rename("cases").reset_index(),
     ], ignore_index=True)
     table1["budget"] = table1["budget"].astype("Int64")
-    table2 = mean_std(done[done["method"] == "ours"], ["source", "species", "view_space"])
+    organs = [f"coverage_{organ}" for organ in ORGANS
+              if f"coverage_{organ}" in done and done[f"coverage_{organ}"].notna().any()]
+    table2 = mean_std(done[done["method"] == "ours"], ["source", "species", "view_space"],
+                      columns=("views", "coverage", "path_length_m", *organs))
     table3 = mean_std(done[done["method"].isin(["ours", "ours-no-inflation"])], ["source", "species", "method"])
     table4 = mean_std(done[done["method"].isin(["ours", "initial-view-only"])], ["source", "method"],
                        columns=("chamfer_truth_mm", "chamfer_after_mm"))

@@ -17,7 +17,9 @@ from tpvp.provenance import provenance
 
 def mean_std(frame: pd.DataFrame, by: list, columns=("views", "coverage", "path_length_m")) -> pd.DataFrame:
     frame = frame.copy()
-    frame["coverage"] = 100 * frame["coverage"]
+    for column in {"coverage", *columns}:  # coverages in percent: the whole plant's and each organ's
+        if column in frame and column.startswith("coverage"):
+            frame[column] = 100 * frame[column]
     grouped = frame.groupby(by, sort=False, dropna=False)
     out = grouped.size().rename("cases").to_frame()
     for column in columns:

@@ -24,9 +24,9 @@ class StandInCamera:
     """Renders captures of ``current`` (today's full scan, the previous model's frame) for a
     session planning on ``previous`` under ``config``."""
 
-    def __init__(self, previous, current, config, names=("previous model", "today's scan")):
+    def __init__(self, previous, current, config, names=("previous model", "today's scan"), organs=(None, None)):
         self.config = PlantSession.session_config(config)
-        self.scene = build_scene(previous, current, self.config, names)
+        self.scene = build_scene(previous, current, self.config, names, organs)
 
     def cloud(self, view: int) -> np.ndarray:
         """What ``view`` observes of today's plant: voxel centres in the world frame."""

@@ -30,6 +30,8 @@ CAPTURE_FILE = re.compile(r"captures/(\d{3,})\.npy")
 #: The plan's files a robot reads.
 PLAN_FILES = ("plan/plan.csv", "plan/plan.json")
 FORMAT, VERSION, STATE = "tpvp-session", 1, "session.json"
+#: The previous model's organ codes, one per point of previous.npy (a session started with --labels).
+ORGANS_FILE = "previous_organs.npy"
 
 
 @dataclass(frozen=True)
@@ -115,6 +117,18 @@ def read_state(folder: Path, kinds) -> tuple[dict | None, list[Problem]]:
     return (None if problems else state), problems
 
 
+def _organs_problem(folder: Path) -> str | None:
+    """Why ``previous_organs.npy`` is not one integer per point of ``previous.npy``; None if it is."""
+    try:
+        organs = np.load(folder / ORGANS_FILE, allow_pickle=False)
+        points = np.load(folder / "previous.npy", mmap_mode="r", allow_pickle=False)
+    except (OSError, ValueError, EOFError) as exc:
+        return f"is damaged (truncated? {str(exc).splitlines()[0][:80]})"
+    if organs.shape != (len(points),) or not np.issubdtype(organs.dtype, np.integer):
+        return f"holds {organs.shape} {organs.dtype}, not one organ code per point of previous.npy ({len(points):,})"
+    return None
+
+
 def _load(path: Path, integer: bool, rows: int | None) -> str | None:
     """Why ``path`` is not an (N, 3) array (integer or finite float, ``rows`` rows); None if it is."""
     if not path.is_file():
@@ -192,6 +206,8 @@ def folder_problems(folder, kinds) -> list[Problem]:
     why = _load(folder / "previous.npy", False, None)
     if why is not None:
         problems.append(Problem(f"{folder / 'previous.npy'} (the previous model) {why}", restore))
+    elif (folder / ORGANS_FILE).exists() and (why := _organs_problem(folder)):
+        problems.append(Problem(f"{folder / ORGANS_FILE} (the previous model's organ labels) {why}", restore))
     config = folder / "config.yaml"
     if not config.is_file():
         problems.append(Problem(f"{config} (the session's configuration) is missing (deleted?)", restore))

@@ -22,6 +22,7 @@ from tpvp.io import read_point_cloud
 from tpvp.io.publish import RunInterrupted, armed_step, late_signals
 from tpvp.io.units import plant_size_warning
 from tpvp.scene.boxes import ROOMS
+from tpvp.scene.organs import LABEL_KINDS, organ_codes
 from tpvp.scene.simulator import NATIVE_RADIUS
 from tpvp.sensor.camera import D435
 from tpvp.session import Session, read_depth, read_intrinsics, read_pose_file
@@ -41,6 +42,9 @@ def session_arguments(session) -> None:
     case_options(start, None, frontier=False)
     start.add_argument("--drop-invalid", action="store_true",
                        help="drop points with NaN or infinite coordinates instead of refusing the model")
+    start.add_argument("--labels", default="none", choices=["none", *LABEL_KINDS],
+                       help="what the previous model's point labels mean (organ, pheno4d, generated-row): its organs "
+                            "follow the registration, for --organ-targets (default: %(default)s)")
     start.add_argument("--output", required=True, type=Path, help="the new session folder")
     _wait_option(start)
     start.set_defaults(func=_session_start)
@@ -69,6 +73,9 @@ def session_arguments(session) -> None:
     plan.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                       help="override one configuration key for this plan")
     plan.add_argument("--coverage-target", default=None, type=float, metavar="FRACTION", help=COVERAGE_TARGET_HELP)
+    plan.add_argument("--organ-targets", default=None, metavar="ORGAN=SHARE,...",
+                      help="each organ's share of its predicted planning voxels, e.g. fruit=1.0,leaf=0.95 (a session "
+                           "started with --labels)")
     replan_option(plan)
     _wait_option(plan)
     plan.set_defaults(func=_session_plan)
@@ -134,12 +141,18 @@ def _session_start(args) -> int:
     if args.view_space in ROOMS and args.config == "paper":
         args.config = "paper-row"  # a room's view space is a greenhouse row's
     config = resolved_config(args)
-    previous, units = read_point_cloud(args.previous, units=args.units, return_units=True,
-                                       drop_invalid=args.drop_invalid)
+    previous, labels, units = read_point_cloud(args.previous, units=args.units, return_units=True,
+                                               return_labels=True, drop_invalid=args.drop_invalid)
+    organs = None
+    if args.labels != "none":
+        if labels is None:
+            raise TpvpError(f"{args.previous}: --labels {args.labels}: the model has no label per point")
+        organs = organ_codes(labels, args.labels)
     if config.setting == "plant":
         print_warnings([w for w in [plant_size_warning(previous, units, str(args.previous))] if w])
     with armed_step():
-        session = Session.start(args.output, previous, config, str(args.previous), units=units.used, wait=args.wait)
+        session = Session.start(args.output, previous, config, str(args.previous), units=units.used, wait=args.wait,
+                                previous_organs=organs)
     positions, _ = session.views()
     where = (f"{config.view_space}, the room's frame" if session.kind == "row" else
              f"{config.view_space}, {session.config.scene.radius or NATIVE_RADIUS:g} m around the plant")
@@ -190,6 +203,8 @@ def _session_plan(args) -> int:
         overrides["selection.coverage_target"] = args.coverage_target
     if args.replan_after is not None:
         overrides["selection.replan_after"] = args.replan_after
+    if args.organ_targets is not None:
+        overrides["selection.organ_targets"] = args.organ_targets
     with _held(args) as session:
         result = session.plan(overrides)
         captured = {c["view"] for c in session.captures}

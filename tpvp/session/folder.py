@@ -31,7 +31,7 @@ from tpvp.io.publish import hold_folder, staged_folder
 from tpvp.scene import voxels
 from tpvp.sensor.camera import look_at_rotation, rotation_to_quaternion
 from tpvp.session.captures import Pose, back_project, surface_voxel_keys
-from tpvp.session.check import (FORMAT, STATE, VERSION, capture_number, centroid_file, folder_problems,
+from tpvp.session.check import (FORMAT, ORGANS_FILE, STATE, VERSION, capture_number, centroid_file, folder_problems,
                                  state_text)
 
 #: How another command is told to wait for the folder: the session's own advice, not another folder.
@@ -78,9 +78,10 @@ class Session:
 
     kind = ""
 
-    def __init__(self, folder: Path, config, state: dict, previous_scan: np.ndarray):
+    def __init__(self, folder: Path, config, state: dict, previous_scan: np.ndarray,
+                 previous_organs: np.ndarray | None = None):
         self.folder, self.config, self.state = Path(folder), config, state
-        self.previous_scan = previous_scan
+        self.previous_scan, self.previous_organs = previous_scan, previous_organs
         self.scene = self._scene(previous_scan)
         self._read = state_text(state)  # session.json as read: a commit refuses a changed one
 
@@ -110,24 +111,31 @@ class Session:
 
     @classmethod
     def start(cls, folder, previous_scan, config, previous_file: str = "previous model", units: str = "m",
-              wait: float = 0.0) -> "Session":
+              wait: float = 0.0, previous_organs=None) -> "Session":
         """A new session in ``folder`` (new or empty) planning on ``previous_scan`` (metres, its own
         frame: the world frame); ``units``: the units its file was read in, for the captures' files;
-        ``wait``: seconds to wait for another command on the folder."""
+        ``wait``: seconds to wait for another command on the folder; ``previous_organs``: the organ
+        code of each of its points (:mod:`tpvp.scene.organs`), kept as ``previous_organs.npy``."""
         if config.setting not in KINDS:
             raise ConfigError(f"tpvp session plans {' and '.join(KINDS)} settings, not {config.setting!r}")
         kind = KINDS[config.setting]
         config = kind.session_config(config)
         points = checked_cloud(previous_scan, previous_file)
+        if previous_organs is not None:
+            previous_organs = np.asarray(previous_organs, dtype=np.int64)
+            if previous_organs.shape != (len(points),):
+                raise ConfigError(f"{previous_file}: {len(previous_organs)} organ labels for {len(points)} points")
         state = {"format": FORMAT, "version": VERSION, "tpvp": __version__, "kind": config.setting,
                  "created_utc": _now(), "previous_file": str(previous_file), "units": units, "captures": []}
-        session = kind(folder, config, state, points)
+        session = kind(folder, config, state, points, previous_organs)
         with cls.locked(folder, wait):
             if (Path(folder) / STATE).is_file():  # checked under the lock: two starts cannot both pass
                 raise ConfigError(f"{folder} already holds a session: continue it (`tpvp session add {folder}`), "
                                   f"or start the new one in a new folder")
             with staged_folder(folder, what="session folder") as stage:
                 atomic_write_bytes(stage.path("previous.npy"), npy_bytes(points))
+                if previous_organs is not None:
+                    atomic_write_bytes(stage.path(ORGANS_FILE), npy_bytes(previous_organs))
                 atomic_write_text(stage.path("config.yaml"), config_yaml(config, "the session's configuration"))
                 atomic_write_text(stage.path(STATE), state_text(state))
         return session
@@ -170,7 +178,8 @@ class Session:
             raise InputFileError(problems[0].line(folder) + more)
         state = json.loads((folder / STATE).read_text())
         previous = np.load(folder / "previous.npy", allow_pickle=False)
-        session = KINDS[state["kind"]](folder, load_config(folder / "config.yaml"), state, previous)
+        organs = np.load(folder / ORGANS_FILE, allow_pickle=False) if (folder / ORGANS_FILE).is_file() else None
+        session = KINDS[state["kind"]](folder, load_config(folder / "config.yaml"), state, previous, organs)
         views = len(session.views()[0])
         wrong = [c["view"] for c in session.captures if c["view"] >= views]
         if wrong:

@@ -33,6 +33,7 @@ from tpvp.nbv.warm_up import start_nbv
 from tpvp.pipeline.plant import Known, plan, planning_surface, transfer
 from tpvp.pipeline.replan import Prediction, Replan, prediction_of, replan
 from tpvp.scene import voxels
+from tpvp.scene.organs import voxel_organs
 from tpvp.scene.simulator import planning_frame
 from tpvp.session.folder import KINDS, Request, Session
 
@@ -57,10 +58,14 @@ class PlantSession(Session):
         frame = planning_frame(previous_scan, config, name)
         frame.view_space.view_index(config.initial_view)  # refuse a bad initial view up front
         previous = frame.to_planning(previous_scan)
-        reduced = (voxels.voxel_centroids(previous, config.scene.reduce_resolution)
-                   if len(previous) > config.scene.reduce_above else previous)
+        resolution = config.scene.reduce_resolution
+        reduced = voxels.voxel_centroids(previous, resolution) if len(previous) > config.scene.reduce_above else previous
+        organs = self.previous_organs
+        if organs is not None and len(reduced) != len(previous):  # a centroid takes its voxel's majority
+            organs = voxel_organs(voxels.voxel_keys(reduced, resolution), resolution, previous, organs)
         return Known(reduced, frame.view_space, frame.sensor, frame.plant_from_scan, frame.reference.table_points,
-                     (name, "today's captures"), {"previous_points": len(previous), "previous_points_used": len(reduced)})
+                     (name, "today's captures"), {"previous_points": len(previous), "previous_points_used": len(reduced)},
+                     organs)
 
     def views(self) -> tuple[np.ndarray, np.ndarray]:
         space = self.scene.view_space
