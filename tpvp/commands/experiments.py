@@ -82,7 +82,7 @@ def experiments_arguments(experiments) -> None:
     plant = which.add_parser("plants", help="individual plants: Tables I-IV, every baseline, the exact optimum")
     case_options(plant, "outputs/experiments/plants", case_options=False)
     plant.add_argument("--dataset", type=Path, default=None,
-                       help="a folder written by `python -m data_tools pheno4d prepare` (default: generated "
+                       help="a folder written by `python -m data_tools pheno4d prepare` or `helios` (default: generated "
                             "tomato and maize pairs plus the bundled real pair, offline)")
     plant.add_argument("--plants", nargs="+", default=None, help="only these plants of the dataset (e.g. Tomato01)")
     plant.add_argument("--pairs", nargs="+", type=int, default=None, help="only these rows of the dataset's pairs.csv")
@@ -126,7 +126,7 @@ def experiments_arguments(experiments) -> None:
                          help=f"scans of each plant, two days apart, or of each row (default: {season.SESSIONS} for a "
                               f"plant, {season.ROW_SESSIONS} for a row)")
     seasons.add_argument("--dataset", type=Path, default=None,
-                         help="a folder written by `python -m data_tools pheno4d prepare`: one season per plant, its "
+                         help="a folder written by `python -m data_tools pheno4d prepare` or `helios`: one season per plant, its "
                               "scans in date order (default: generated plants)")
     seasons.add_argument("--plants", nargs="+", default=None, help="only these plants of the dataset (e.g. Tomato01)")
     seasons.add_argument("--rows", action="store_true",

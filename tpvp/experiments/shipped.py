@@ -29,9 +29,10 @@ import pandas as pd
 
 from tpvp.config import make_config
 from tpvp.errors import ConfigError, run_command
-from tpvp.experiments import ablation, plants, rows, season
+from tpvp.experiments import ablation, plants, rows, season, species
 from tpvp.experiments.runner import cached_experiments, experiment_cache
 from tpvp.io import atomic_write_bytes, atomic_write_text
+from tpvp.parallel import run_cases
 
 ROOT = Path(__file__).resolve().parent.parent.parent
 SHIPPED = ROOT / "tpvp" / "data" / "results"
@@ -45,7 +46,7 @@ class Protocol:
     """What one notebook's tables are made of: the ``setting``'s full cases (rows: of
     ``references``; ``first_case_only`` for the timing of one case) and ``methods``."""
 
-    setting: str  # "plants", "rows", "season" (plants) or "row_season"
+    setting: str  # "plants", "rows", "season" (plants), "row_season" or "species"
     methods: tuple
     references: tuple = ("handheld",)
     first_case_only: bool = False
@@ -58,6 +59,8 @@ class Protocol:
             return season.season_cases()
         if self.setting == "row_season":
             return season.row_season_cases()
+        if self.setting == "species":
+            return species.species_cases(species.helios_dataset())
         cases = rows.default_row_cases(quick=False, references=self.references)
         return cases[:1] if self.first_case_only else cases
 
@@ -69,6 +72,10 @@ class Protocol:
         if self.setting == "season":
             return season.run_season_experiments(self.cases(), self.methods, cache_dir=cache_dir, workers=self.workers,
                                                  progress=progress)
+        if self.setting == "species":  # one row per case, nothing cached: about 15 min
+            tables = run_cases(species.species_rows, self.cases(), (), 1, self.workers, progress=progress,
+                               desc="species")
+            return pd.concat(tables, ignore_index=True).sort_values(["instance", "view_space"], ignore_index=True)
         if self.setting == "row_season":
             return season.run_row_season_experiments(self.cases(), self.methods, make_config("row"), cache_dir=cache_dir,
                                                      workers=self.workers, progress=progress)
@@ -79,6 +86,8 @@ class Protocol:
         """The protocol's rows from ``cache_dir`` when every (case, method) is there, else None."""
         if self.setting == "plants":
             return plants.cached_experiments(self.cases(), list(self.methods), cache_dir=cache_dir)
+        if self.setting == "species":
+            return None
         if self.setting in ("season", "row_season"):
             experiment, setting = ((season.SEASON_EXPERIMENTS, "plant") if self.setting == "season"
                                    else (season.ROW_SEASON_EXPERIMENTS, "row"))
@@ -97,6 +106,7 @@ PROTOCOLS = {
     "planning_time": Protocol("rows", ("ours", "blockwise-nbv"), first_case_only=True, workers=1),
     "season": Protocol("season", season.ARMS),
     "row_season": Protocol("row_season", season.ARMS),
+    "species": Protocol("species", ("ours",)),  # on a Helios dataset: species.helios_dataset()
 }
 
 

@@ -9,11 +9,20 @@ sees), so they apply to any scene; :func:`showcase` builds one case's scene and 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import os
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
 
 from tpvp.config import make_config
+from tpvp.errors import ConfigError
+from tpvp.experiments import plants
 from tpvp.experiments.baselines import optimum
-from tpvp.experiments.single_plant import build_scene, run_case
+from tpvp.experiments.single_plant import build_scene, run_case, transfer
+from tpvp.pipeline.jit import compile_kernels
+from tpvp.scene.organs import CODE
 from tpvp.metrics.views import (  # noqa: F401 (the notebook's statistics, used here too)
     coverage_curve,
     first_seen_step,
@@ -64,3 +73,96 @@ def plan_row(item: Showcase, with_optimum: bool = True) -> dict:
     if with_optimum:
         row["optimum_views_100pct"] = int(optimum(item.scene, item.config, targets=(1.0,))["views"].iloc[0])
     return row
+
+
+# --------------------------------------------------------------------------------------------------
+# across species: the coverage-target rule and per-organ targets on an independent generator
+# --------------------------------------------------------------------------------------------------
+
+#: The coverage asked of every species, and the per-organ targets asked of the fruiting ones.
+SPECIES_TARGET = 0.98
+ORGAN_TARGETS = "fruit=1.0,leaf=0.95"
+#: Where the Helios dataset of the species protocol lies (``python -m data_tools helios``, see
+#: :func:`helios_dataset`); the environment variable ``TPVP_HELIOS_DATASET`` names another.
+HELIOS_DATASET = Path("data") / "helios"
+GROW_COMMAND = ("python -m data_tools helios --species tomato strawberry soybean bean cowpea maize rice sugarbeet "
+                "--ages ... --plants 3 --output data/helios (benchmarks/helios_generation.py holds each species' ages)")
+
+
+def helios_dataset(required: bool = True) -> Path | None:
+    """The Helios dataset the species protocol reads; when missing, one line saying how to grow it
+    (None when not ``required``)."""
+    folder = Path(os.environ.get("TPVP_HELIOS_DATASET", HELIOS_DATASET))
+    if not (folder / "pairs.csv").is_file():
+        if not required:
+            return None
+        raise ConfigError(f"{folder}: no Helios dataset (pairs.csv); grow it with {GROW_COMMAND}, or name another "
+                          f"with TPVP_HELIOS_DATASET")
+    return folder
+
+
+def species_cases(dataset=None) -> list:
+    """Each plant's latest session pair of a prepared dataset (its most fruit) beside our generated
+    tomato and maize (seeds 0-2) and the bundled real pair; rotation 0, initial view 17, both view
+    spaces."""
+    instances = plants.generated_instances(seeds=(0, 1, 2)) + [plants.bundled_instance()]
+    if dataset is not None:
+        latest = plants.dataset_table(dataset).groupby("plant", sort=True).tail(1).index.tolist()
+        instances += plants.dataset_instances(dataset, pairs=latest)
+    return plants.case_list(instances, view_spaces=("hemisphere", "sphere"), rotations=(0.0,), initial_views=(17,))
+
+
+def _selection(config, **values):
+    return replace(config, selection=replace(config.selection, **values))
+
+
+def species_rows(case) -> list:
+    """One case's row (a task of :func:`tpvp.parallel.run_cases`): the plan for
+    :data:`SPECIES_TARGET` beside the exact optimum for it (perfect knowledge, same initial view),
+    true coverage per organ; on a plant whose previous session holds fruit, :data:`ORGAN_TARGETS`
+    against the full cover."""
+    compile_kernels()
+    config = case.config(make_config("plant"))
+    scene = build_scene(*case.instance.load(), config, organs=case.instance.organs())
+    shared = transfer(scene, config)
+    planned = run_case(scene, _selection(config, coverage_target=SPECIES_TARGET), transferred=shared)
+    best = optimum(scene, config, targets=(SPECIES_TARGET,)).iloc[0]
+    row = {**case.labels(), "method": "ours", "views": planned.n_views, "optimum_views": int(best["views"]),
+           "coverage": planned.coverage, "path_length_m": planned.path_length,
+           **{f"coverage_{organ}": value for organ, value in planned.organ_coverage.items()}}
+    if scene.previous_organs is not None and (scene.previous_organs == CODE["fruit"]).any():
+        full = run_case(scene, config, transferred=shared)
+        targeted = run_case(scene, _selection(config, organ_targets=ORGAN_TARGETS), transferred=shared)
+        row.update(full_views=full.n_views, full_coverage=full.coverage, full_fruit=full.organ_coverage.get("fruit"),
+                   organ_views=targeted.n_views, organ_coverage=targeted.coverage,
+                   organ_fruit=targeted.organ_coverage.get("fruit"), organ_leaf=targeted.organ_coverage.get("leaf"))
+    return [pd.DataFrame([row])]
+
+
+def species_tables(raw: pd.DataFrame) -> dict:
+    """The species protocol's tables: the evaluation species (a dataset's) per view space, every
+    species per view space with its organs, and the organ targets against the full cover."""
+    raw = raw.assign(ratio=raw["views"] / raw["optimum_views"], below_97=raw["coverage"] < 0.97,
+                     species=np.where(raw["source"] == "dataset", "helios " + raw["species"],
+                                      raw["source"] + " " + raw["species"]))
+    organs = [c for c in raw.columns if c.startswith("coverage_") and raw[c].notna().any()]
+    evaluation = raw[raw["source"] == "dataset"]
+    overall = evaluation.groupby("view_space").agg(
+        cases=("views", "size"), coverage_mean=("coverage", "mean"), coverage_min=("coverage", "min"),
+        cases_below_97=("below_97", "sum"), views_per_optimum=("ratio", "mean"),
+        views=("views", "sum"), optimum=("optimum_views", "sum")).reset_index()
+    overall.insert(6, "ratio_of_means", overall.pop("views") / overall.pop("optimum"))
+    per_species = raw.groupby(["species", "view_space"]).agg(
+        cases=("views", "size"), views=("views", "mean"), optimum=("optimum_views", "mean"),
+        views_per_optimum=("ratio", "mean"), coverage_mean=("coverage", "mean"), coverage_min=("coverage", "min"),
+        path_m=("path_length_m", "mean"), **{c.removeprefix("coverage_"): (c, "mean") for c in organs}).reset_index()
+    tables = {"overall": overall, "per_species": per_species}
+    if "organ_views" in raw:
+        fruiting = raw[raw["organ_views"].notna()]
+        tables["organ_targets"] = fruiting.groupby(["species", "view_space"]).agg(
+            cases=("views", "size"), full_cover_views=("full_views", "mean"), organ_target_views=("organ_views", "mean"),
+            fruit_mean=("organ_fruit", "mean"), fruit_min=("organ_fruit", "min"), leaf_mean=("organ_leaf", "mean"),
+            full_cover_fruit=("full_fruit", "mean")).reset_index()
+        saved = tables["organ_targets"]
+        saved.insert(4, "views_saved", 1 - saved["organ_target_views"] / saved["full_cover_views"])
+    return tables

@@ -195,15 +195,16 @@ def selection_problem(known: Known, config: PlantConfig, transferred: Transfer,
         weights = surface_weights(surface.classes, config.surface_weights, surface.area)
     target = selection.planning_target(config.view_space)
     targets = selection.organ_target_values()
-    groups = organ_groups(surface.organs, targets, target, known.names[0]) if targets else None
+    groups, shares = organ_groups(surface.organs, targets, target, known.names[0]) if targets else (None, None)
     return SelectionProblem(surface.visibility, tuple(transferred.executed), known.view_space,
                             surface.grid.centres, target, voxel_weights=weights, nbv=transferred.nbv,
-                            voxel_groups=groups and groups[0], group_targets=groups and groups[1])
+                            voxel_groups=groups, group_targets=shares)
 
 
 def organ_groups(organs, targets: dict, planning_target: float, name: str):
     """``(group of each planning voxel, each group's share)`` for per-organ targets: one group per
-    organ named in ``targets``, one for every other voxel (``planning_target``). Targets without organ labels are one clear error."""
+    organ named in ``targets``, one for every other voxel (``planning_target``). Targets without
+    organ labels are one clear error."""
     if organs is None:
         raise ConfigError(f"organ targets ({', '.join(targets)}) need the previous model's organ labels: {name} "
                           f"has none (give a labelled scan and --labels organ|pheno4d)")

@@ -229,3 +229,48 @@ def plot_hard_voxels(path, panels, few: int = 2, title: str = ""):
         fig.suptitle(title)
     fig.tight_layout()
     return _save(fig, path)
+
+
+def plot_species_optimum(path, per_species, title: str = ""):
+    """Per species (rows of :func:`tpvp.experiments.species.species_tables`' ``per_species``), one
+    panel per view space: the plan's views for 98 % beside the exact optimum's, the ratio above,
+    the species in the order of the hemisphere's ratio."""
+    spaces = list(dict.fromkeys(per_species["view_space"]))
+    order = (per_species[per_species["view_space"] == spaces[0]].sort_values("views_per_optimum")["species"].tolist())
+    fig, axes = plt.subplots(1, len(spaces), figsize=(6.5 * len(spaces), 4.6), squeeze=False, sharey=True)
+    for ax, space in zip(axes[0], spaces):
+        table = per_species[per_species["view_space"] == space].set_index("species").reindex(order)
+        x = np.arange(len(order))
+        ax.bar(x - 0.2, table["views"], 0.4, color="tab:blue", label="plan for 98 %")
+        ax.bar(x + 0.2, table["optimum"], 0.4, color="0.6", label="exact optimum for 98 %")
+        for i, (views, ratio) in enumerate(zip(table["views"], table["views_per_optimum"])):
+            ax.text(i - 0.2, views, f"{ratio:.2f}x", ha="center", va="bottom", fontsize=7)
+        ax.set_xticks(x, [s.replace(" ", "\n", 1) for s in order], fontsize=7)
+        ax.set_title(space, fontsize=9)
+        ax.grid(axis="y", alpha=0.3)
+    axes[0, 0].set_ylabel("views (mean over the cases)")
+    axes[0, 0].legend(fontsize=8)
+    if title:
+        fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    return _save(fig, path)
+
+
+def plot_organ_targets(path, organ_targets, title: str = ""):
+    """Per fruiting species and view space (``organ_targets`` of
+    :func:`tpvp.experiments.species.species_tables`): the views of the full cover beside those of the
+    organ targets, the true fruit coverage (mean) above the organ targets' bar."""
+    labels = [f"{r.species.replace('helios ', '')}\n{r.view_space}" for r in organ_targets.itertuples()]
+    x = np.arange(len(labels))
+    fig, ax = plt.subplots(figsize=(max(6.0, 0.75 * len(labels)), 4.2))
+    ax.bar(x - 0.2, organ_targets["full_cover_views"], 0.4, color="0.6", label="--coverage-target 1.0")
+    ax.bar(x + 0.2, organ_targets["organ_target_views"], 0.4, color="tab:orange", label="fruit=1.0, leaf=0.95")
+    for i, (views, fruit) in enumerate(zip(organ_targets["organ_target_views"], organ_targets["fruit_mean"])):
+        ax.text(i + 0.2, views, f"fruit\n{100 * fruit:.1f} %", ha="center", va="bottom", fontsize=6.5)
+    ax.set_xticks(x, labels, fontsize=7)
+    ax.set_ylabel("views (mean over the cases)")
+    ax.grid(axis="y", alpha=0.3)
+    ax.legend(fontsize=8)
+    ax.set_title(title, fontsize=10)
+    fig.tight_layout()
+    return _save(fig, path)
