@@ -124,3 +124,17 @@ def test_organ_targets_hold_through_re_planning(labelled_scene):
     config = make_config("plant", {"selection.organ_targets": "leaf=0.9", "selection.replan_after": 2})
     result = run_case(scene, config)
     assert result.replans and result.planning_organs["leaf"] >= 0.9 and result.planning_organs["stem"] == 1.0
+
+
+def test_a_named_organ_s_target_holds_its_neighbours_when_stricter():
+    from tpvp.pipeline.plant import organ_groups
+
+    keys = np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0], [0, 1, 0], [5, 5, 5]])
+    organs = np.array([CODE["fruit"], CODE["leaf"], CODE["leaf"], CODE["stem"], CODE["leaf"]])
+    groups, shares = organ_groups(organs, {"fruit": 1.0, "leaf": 0.95}, 0.98, "prior", keys)
+    assert shares == (1.0, 0.95, 0.98)
+    # the leaf voxel next to the fruit is held to the fruit's share, the stem next to it too (stricter
+    # than the others' 0.98); the leaf two voxels away and the far one keep the leaves' share
+    np.testing.assert_array_equal(groups, [0, 0, 1, 0, 1])
+    groups, _ = organ_groups(organs, {"leaf": 0.9}, 1.0, "prior", keys)
+    np.testing.assert_array_equal(groups, [1, 0, 0, 1, 0])  # a looser neighbour never lowers a share
