@@ -90,3 +90,13 @@ def test_the_shipped_pose_noise_rows_give_the_readmes_numbers():
     noisy = table7[(table7["sigma_t_m"] == 0.01) & (table7["sigma_r_deg"] == 2) & (table7["icp"] == "ON")].iloc[0]
     shown = [f"{noisy['chamfer_mm_mean']:.2f}", f"{noisy['chamfer_mm_std']:.2f}", f"{noisy['f1_10mm_mean']:.1f}"]
     assert _numbers(_readme_row("rows, pose noise 0.01 m / 2°, with ICP: Chamfer, F1")) == shown
+
+
+def test_the_shipped_species_rows_give_the_readmes_numbers():
+    overall = species.species_tables(shipped.shipped_rows("species"))["overall"].set_index("view_space")
+    shown = [value for space in ("hemisphere", "sphere")
+             for value in (f"{100 * overall.loc[space, 'coverage_mean']:.2f}",
+                           f"{100 * overall.loc[space, 'coverage_min']:.2f}",
+                           f"{overall.loc[space, 'views_per_optimum']:.2f}")]
+    assert _numbers(_readme_row("8 Helios species, asking for 98 %: true coverage mean (min), views / exact optimum")) \
+        == shown
