@@ -17,6 +17,7 @@ import numpy as np
 
 from data_tools.capture.formats import Capture, check_depth_units, load_colour, load_confidence, load_depth
 from data_tools.errors import ConfigError, PointCloudError
+from tpvp.sensor.camera import project
 
 GREY = 128  # the colour of a frame without a colour image
 BLOCK_RESOLUTION = 8  # voxels along a block's side
@@ -157,14 +158,10 @@ def supported(points, poses, measured, tolerance: float) -> np.ndarray:
     points = np.asarray(points, dtype=np.float64)
     kept = np.zeros(len(points), dtype=bool)
     for pose, (depth, k) in zip(poses, measured):
-        local = (points - pose[:3, 3]) @ pose[:3, :3]
-        z = local[:, 2]
-        front = z > 0
-        u = np.full(len(points), -1)
-        v = np.full(len(points), -1)
-        u[front] = np.rint(k.fx * local[front, 0] / z[front] + k.cx)
-        v[front] = np.rint(k.fy * local[front, 1] / z[front] + k.cy)
-        inside = np.flatnonzero(front & (u >= 0) & (u < k.width) & (v >= 0) & (v < k.height))
-        at = depth[v[inside], u[inside]]
+        u, v, z = project(points, pose[:3, 3], pose[:3, :3], k)
+        with np.errstate(invalid="ignore"):  # points behind the camera project to inf or NaN
+            u, v = np.rint(u), np.rint(v)
+            inside = np.flatnonzero((z > 0) & (u >= 0) & (u < k.width) & (v >= 0) & (v < k.height))
+        at = depth[v[inside].astype(np.int64), u[inside].astype(np.int64)]
         kept[inside[(at > 0) & (np.abs(at - z[inside]) <= tolerance)]] = True
     return kept

@@ -64,44 +64,43 @@ class Instance:
     current_file: str = ""
 
     def load(self) -> tuple[np.ndarray, np.ndarray]:
-        return _load_instance(self)
+        return _read_instance(self)[:2]
 
     def organs(self) -> tuple:
         """The organ codes (:mod:`tpvp.scene.organs`) of both sessions' points, or ``(None, None)``:
         a generated pair's parts, a dataset's labels as its manifest's ``label_kind`` says."""
-        return _instance_organs(self)
+        return _read_instance(self)[2:]
 
 
 @lru_cache(maxsize=4)
-def _instance_organs(instance: Instance) -> tuple:
+def _read_instance(instance: Instance) -> tuple:
+    """``(previous points, current points, previous organs, current organs)``, each scan read once."""
     if instance.source == "generated":
         pair = generate_session_pair(instance.species, instance.seed, days=2.0)
-        return tuple(part_organ_codes(s.part_kinds, s.part) for s in (pair.previous, pair.current))
-    if instance.source != "dataset":
-        return None, None
-    files = [Path(instance.previous_file), Path(instance.current_file)]
-    manifest = files[0].parent.parent / "manifest.csv"
-    kind = "none"
-    if manifest.is_file():
-        table = pd.read_csv(manifest)
-        if "label_kind" in table.columns:
-            kinds = table.loc[table["file"] == f"{files[0].parent.name}/{files[0].name}", "label_kind"]
-            kind = str(kinds.iloc[0]) if len(kinds) and isinstance(kinds.iloc[0], str) else "none"
-    if kind not in LABEL_KINDS:
-        return None, None
-    labels = [read_point_cloud(f, units="m", return_labels=True)[1] for f in files]
-    return tuple(None if lab is None else organ_codes(lab, kind) for lab in labels)
-
-
-@lru_cache(maxsize=4)
-def _load_instance(instance: Instance):
-    if instance.source == "generated":
-        pair = generate_session_pair(instance.species, instance.seed, days=2.0)
-        return pair.previous.points, pair.current.points
+        return (pair.previous.points, pair.current.points,
+                *(part_organ_codes(s.part_kinds, s.part) for s in (pair.previous, pair.current)))
     if instance.source == "bundled":
-        return load_sample("tomato_0305"), load_sample("tomato_0306")
+        return load_sample("tomato_0305"), load_sample("tomato_0306"), None, None
+    files = [Path(instance.previous_file), Path(instance.current_file)]
+    (previous, previous_labels), (current, current_labels) = (read_point_cloud(f, units="m", return_labels=True)
+                                                              for f in files)
+    kind = _label_kind(files[0])
+    organs = [None if kind not in LABEL_KINDS or labels is None else organ_codes(labels, kind)
+              for labels in (previous_labels, current_labels)]
+    return previous, current, *organs
 
-    return (read_point_cloud(instance.previous_file, units="m"), read_point_cloud(instance.current_file, units="m"))
+
+def _label_kind(file: Path) -> str:
+    """What the labels of a prepared dataset's scan mean: its manifest's ``label_kind`` ("none"
+    without one, as an older dataset has)."""
+    manifest = file.parent.parent / "manifest.csv"
+    if not manifest.is_file():
+        return "none"
+    table = pd.read_csv(manifest)
+    if "label_kind" not in table.columns:
+        return "none"
+    kinds = table.loc[table["file"] == f"{file.parent.name}/{file.name}", "label_kind"]
+    return str(kinds.iloc[0]) if len(kinds) and isinstance(kinds.iloc[0], str) else "none"
 
 
 @dataclass(frozen=True)

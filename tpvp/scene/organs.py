@@ -66,3 +66,12 @@ def voxel_organs(keys, resolution: float, points, organs) -> np.ndarray:
     labelled = votes.sum(axis=1) > 0
     result[labelled] = np.argmax(votes[labelled], axis=1)
     return result
+
+
+def reduced_organs(reduced, points, organs, resolution: float):
+    """The organ codes of ``reduced``, the voxel centroids at ``resolution`` of the labelled
+    ``points`` (a scan reduced before planning): each centroid takes its voxel's majority; the
+    codes as they are when nothing was reduced, None without codes."""
+    if organs is None or len(reduced) == len(points):
+        return organs
+    return voxel_organs(voxels.voxel_keys(reduced, resolution), resolution, points, organs)

@@ -12,7 +12,7 @@ import numpy as np
 
 from tpvp.errors import ConfigError, PointCloudError, checked_cloud
 from tpvp.scene import voxels
-from tpvp.scene.organs import voxel_organs
+from tpvp.scene.organs import reduced_organs, voxel_organs
 from tpvp.scene.grid import plant_grid
 from tpvp.scene.normalise import check_session_pair, normalise_plant, up_rotation
 from tpvp.viewspace import get_view_space
@@ -161,10 +161,7 @@ def _organs(organs, previous, labelled_previous, grid, labelled_current, config,
     for codes, points, which in ((previous_codes, labelled_previous, 0), (current_codes, labelled_current, 1)):
         if codes is not None and len(codes) != len(points):
             raise ConfigError(f"{names[which]}: {len(codes)} organ labels for its {len(points)} points")
-    if previous_codes is not None and len(previous) != len(labelled_previous):
-        resolution = config.scene.reduce_resolution
-        previous_codes = voxel_organs(voxels.voxel_keys(previous, resolution), resolution, labelled_previous,
-                                      previous_codes)
+    previous_codes = reduced_organs(previous, labelled_previous, previous_codes, config.scene.reduce_resolution)
     if current_codes is not None:
         current_codes = voxel_organs(grid.keys, config.gt_resolution, labelled_current, current_codes)
     return previous_codes, current_codes

@@ -33,7 +33,7 @@ from tpvp.nbv.warm_up import start_nbv
 from tpvp.pipeline.plant import Known, plan, planning_surface, transfer
 from tpvp.pipeline.replan import Prediction, Replan, prediction_of, replan
 from tpvp.scene import voxels
-from tpvp.scene.organs import voxel_organs
+from tpvp.scene.organs import reduced_organs
 from tpvp.scene.simulator import planning_frame
 from tpvp.session.folder import KINDS, Request, Session
 
@@ -60,9 +60,7 @@ class PlantSession(Session):
         previous = frame.to_planning(previous_scan)
         resolution = config.scene.reduce_resolution
         reduced = voxels.voxel_centroids(previous, resolution) if len(previous) > config.scene.reduce_above else previous
-        organs = self.previous_organs
-        if organs is not None and len(reduced) != len(previous):  # a centroid takes its voxel's majority
-            organs = voxel_organs(voxels.voxel_keys(reduced, resolution), resolution, previous, organs)
+        organs = reduced_organs(reduced, previous, self.previous_organs, resolution)
         return Known(reduced, frame.view_space, frame.sensor, frame.plant_from_scan, frame.reference.table_points,
                      (name, "today's captures"), {"previous_points": len(previous), "previous_points_used": len(reduced)},
                      organs)
