@@ -131,10 +131,15 @@ def test_a_named_organ_s_target_holds_its_neighbours_when_stricter():
 
     keys = np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0], [0, 1, 0], [5, 5, 5]])
     organs = np.array([CODE["fruit"], CODE["leaf"], CODE["leaf"], CODE["stem"], CODE["leaf"]])
-    groups, shares = organ_groups(organs, {"fruit": 1.0, "leaf": 0.95}, 0.98, "prior", keys)
+    groups, shares = organ_groups(organs, {"fruit": 1.0, "leaf": 0.95}, 0.98, "prior", keys, margin=1)
     assert shares == (1.0, 0.95, 0.98)
     # the leaf voxel next to the fruit is held to the fruit's share, the stem next to it too (stricter
     # than the others' 0.98); the leaf two voxels away and the far one keep the leaves' share
     np.testing.assert_array_equal(groups, [0, 0, 1, 0, 1])
-    groups, _ = organ_groups(organs, {"leaf": 0.9}, 1.0, "prior", keys)
+    # two voxels of margin reach the second leaf voxel too; none leaves every voxel its own organ's
+    np.testing.assert_array_equal(organ_groups(organs, {"fruit": 1.0, "leaf": 0.95}, 0.98, "prior", keys, margin=2)[0],
+                                  [0, 0, 0, 0, 1])
+    np.testing.assert_array_equal(organ_groups(organs, {"fruit": 1.0, "leaf": 0.95}, 0.98, "prior", keys, margin=0)[0],
+                                  [0, 1, 1, 2, 1])
+    groups, _ = organ_groups(organs, {"leaf": 0.9}, 1.0, "prior", keys, margin=1)
     np.testing.assert_array_equal(groups, [1, 0, 0, 1, 0])  # a looser neighbour never lowers a share

@@ -205,3 +205,31 @@ def test_after_a_signal_the_interrupts_debris_is_not_printed():
     assert printed == [debris]
     _redeliver([signal.SIGTERM], printed.append)(debris)
     assert printed == [debris]
+
+
+def test_an_interrupt_swallowed_in_a_finaliser_is_raised_again_outside_the_hook():
+    """A KeyboardInterrupt raised inside a ``__del__`` (a C callback) reaches the hook, not the
+    command: the hook raises it again, after it has returned (raised in the hook, Python would print
+    it as the hook's own error and drop it)."""
+    import subprocess
+    import sys
+
+    script = """
+import signal, sys
+from tpvp.__main__ import _interrupt, _redeliver
+received = []
+signal.signal(signal.SIGINT, _interrupt(received))
+sys.unraisablehook = _redeliver(received, sys.unraisablehook)
+class Finaliser:
+    def __del__(self):
+        received.append(signal.SIGINT)
+        raise KeyboardInterrupt
+try:
+    Finaliser()
+    for _ in range(10**9):
+        pass
+except KeyboardInterrupt:
+    print("raised again")
+"""
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120)
+    assert done.stdout.strip() == "raised again" and done.stderr == "", (done.stdout, done.stderr)

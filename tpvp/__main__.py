@@ -60,6 +60,7 @@ def missing_message(prog: str, name: str, more: int = 0) -> str:
 
 
 _STOPS = (signal.SIGINT, signal.SIGTERM)
+REDELIVERY_DELAY_S = 0.01  # a swallowed interrupt is raised again this much later (:func:`_redeliver`)
 
 
 def _stop_at_once(prog: str):
@@ -101,9 +102,12 @@ def _redeliver(received: list, previous_hook):
     def hook(unraisable):
         if received:
             if isinstance(unraisable.exc_value, KeyboardInterrupt):
-                # Handled again at the next Python code after this hook (signal.raise_signal would
-                # run the handler inside the hook, whose KeyboardInterrupt Python prints and drops).
-                _thread.interrupt_main(received[-1])
+                # From another thread, a moment later: raised here (interrupt_main or raise_signal
+                # in this thread run the handler before the hook returns), the KeyboardInterrupt
+                # would be printed as the hook's own error and dropped.
+                later = threading.Timer(REDELIVERY_DELAY_S, _thread.interrupt_main, (received[-1],))
+                later.daemon = True
+                later.start()
             return
         previous_hook(unraisable)
     return hook

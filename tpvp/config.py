@@ -186,7 +186,12 @@ class SelectionConfig:
     ``1 - planning_miss_ratio x (1 - coverage_target)`` of the planning surface (None: the
     calibrated ratio of the view space, :data:`CALIBRATED_MISS_RATIO`; 1: the target applies to the
     prediction as it is). replan_after: a plant's plan is re-planned from the captures after every
-    this many planned views (:mod:`tpvp.pipeline.replan`; 0: the paper's one-shot plan)."""
+    this many planned views (:mod:`tpvp.pipeline.replan`; 0: the paper's one-shot plan).
+    organ_targets: per-organ shares of the planning surface (:meth:`organ_target_values`);
+    organ_margin_voxels: a named organ's share also holds the planning voxels within this many
+    voxels of its predicted ones (organs grow between sessions and a fruit swells into what the
+    registered prior labels leaf; 2: calibrated on Helios tomato and maize,
+    benchmarks/species_calibration.py)."""
 
     method: str = "set-cover"
     cover_resolution: float = 0.004
@@ -194,11 +199,13 @@ class SelectionConfig:
     planning_miss_ratio: float | None = None
     replan_after: int = 0
     organ_targets: str = ""
+    organ_margin_voxels: int = 2
     set_cover: SetCoverConfig = field(default_factory=SetCoverConfig)
 
     def __post_init__(self):
         _positive(self, "cover_resolution")
         _integer(self, "replan_after", minimum=0)
+        _integer(self, "organ_margin_voxels", minimum=0)
         self.organ_target_values()  # one line now for a malformed organ_targets, not mid-run
         if not (isinstance(self.coverage_target, (int, float)) and 0 < self.coverage_target <= 1):
             raise ConfigError(f"selection.coverage_target must be in (0, 1], got {self.coverage_target!r}")

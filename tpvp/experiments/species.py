@@ -81,6 +81,9 @@ def plan_row(item: Showcase, with_optimum: bool = True) -> dict:
 
 #: The coverage asked of every species, and the per-organ targets asked of the fruiting ones.
 SPECIES_TARGET = 0.98
+#: The species the rules may be calibrated on (issue 39: tomato and maize); a dataset's others are
+#: evaluation data (benchmarks/species_calibration.py).
+CALIBRATION_SPECIES = ("tomato", "maize")
 ORGAN_TARGETS = "fruit=1.0,leaf=0.95"
 #: Where the Helios dataset of the species protocol lies (``python -m data_tools helios``, see
 #: :func:`helios_dataset`); the environment variable ``TPVP_HELIOS_DATASET`` names another.
@@ -140,23 +143,30 @@ def species_rows(case) -> list:
 
 
 def species_tables(raw: pd.DataFrame) -> dict:
-    """The species protocol's tables: the evaluation species (a dataset's) per view space, every
+    """The species protocol's tables: the evaluation species (a dataset's but
+    :data:`CALIBRATION_SPECIES`) per view space, the dataset's calibration species alike, every
     species per view space with its organs, and the organ targets against the full cover."""
     raw = raw.assign(ratio=raw["views"] / raw["optimum_views"], below_97=raw["coverage"] < 0.97,
                      species=np.where(raw["source"] == "dataset", "helios " + raw["species"],
                                       raw["source"] + " " + raw["species"]))
     organs = [c for c in raw.columns if c.startswith("coverage_") and raw[c].notna().any()]
-    evaluation = raw[raw["source"] == "dataset"]
-    overall = evaluation.groupby("view_space").agg(
-        cases=("views", "size"), coverage_mean=("coverage", "mean"), coverage_min=("coverage", "min"),
-        cases_below_97=("below_97", "sum"), views_per_optimum=("ratio", "mean"),
-        views=("views", "sum"), optimum=("optimum_views", "sum")).reset_index()
-    overall.insert(6, "ratio_of_means", overall.pop("views") / overall.pop("optimum"))
+    helios = raw[raw["source"] == "dataset"]
+    calibration = helios["species"].isin([f"helios {name}" for name in CALIBRATION_SPECIES])
+
+    def overall_of(cases):
+        table = cases.groupby("view_space").agg(
+            cases=("views", "size"), coverage_mean=("coverage", "mean"), coverage_min=("coverage", "min"),
+            cases_below_97=("below_97", "sum"), views_per_optimum=("ratio", "mean"),
+            views=("views", "sum"), optimum=("optimum_views", "sum")).reset_index()
+        table.insert(6, "ratio_of_means", table.pop("views") / table.pop("optimum"))
+        return table
+
+    overall, calibration_species = overall_of(helios[~calibration]), overall_of(helios[calibration])
     per_species = raw.groupby(["species", "view_space"]).agg(
         cases=("views", "size"), views=("views", "mean"), optimum=("optimum_views", "mean"),
         views_per_optimum=("ratio", "mean"), coverage_mean=("coverage", "mean"), coverage_min=("coverage", "min"),
         path_m=("path_length_m", "mean"), **{c.removeprefix("coverage_"): (c, "mean") for c in organs}).reset_index()
-    tables = {"overall": overall, "per_species": per_species}
+    tables = {"overall": overall, "calibration_species": calibration_species, "per_species": per_species}
     if "organ_views" in raw:
         fruiting = raw[raw["organ_views"].notna()]
         tables["organ_targets"] = fruiting.groupby(["species", "view_space"]).agg(

@@ -196,24 +196,19 @@ def selection_problem(known: Known, config: PlantConfig, transferred: Transfer,
         weights = surface_weights(surface.classes, config.surface_weights, surface.area)
     target = selection.planning_target(config.view_space)
     targets = selection.organ_target_values()
-    groups, shares = (organ_groups(surface.organs, targets, target, known.names[0], surface.grid.keys) if targets
-                      else (None, None))
+    groups, shares = (organ_groups(surface.organs, targets, target, known.names[0], surface.grid.keys,
+                                   selection.organ_margin_voxels) if targets else (None, None))
     return SelectionProblem(surface.visibility, tuple(transferred.executed), known.view_space,
                             surface.grid.centres, target, voxel_weights=weights, nbv=transferred.nbv,
                             voxel_groups=groups, group_targets=shares)
 
 
-#: A named organ's target also holds the voxels within this many planning voxels of its predicted
-#: ones (face neighbours): organs grow between sessions, and a fruit swells into what the registered
-#: prior labels leaf, as the inflation lets the whole plant grow.
-ORGAN_MARGIN_VOXELS = 1
-
-
-def organ_groups(organs, targets: dict, planning_target: float, name: str, keys):
+def organ_groups(organs, targets: dict, planning_target: float, name: str, keys, margin: int):
     """``(group of each planning voxel, each group's share)`` for per-organ targets: one group per
     organ named in ``targets``, one for every other voxel (``planning_target``); a voxel within
-    :data:`ORGAN_MARGIN_VOXELS` of a named organ's voxels takes that organ's share when it is the
-    stricter. ``keys``: the planning voxels' keys. Targets without organ labels are one clear error."""
+    ``margin`` voxels (``selection.organ_margin_voxels``) of a named organ's voxels takes that
+    organ's share when it is the stricter. ``keys``: the planning voxels' keys. Targets without
+    organ labels are one clear error."""
     if organs is None:
         raise ConfigError(f"organ targets ({', '.join(targets)}) need the previous model's organ labels: {name} "
                           f"has none (give a labelled scan and --labels organ|pheno4d)")
@@ -223,7 +218,7 @@ def organ_groups(organs, targets: dict, planning_target: float, name: str, keys)
     for group, code in enumerate(named):
         groups[organs == code] = group
     for group in np.argsort(-shares[:-1], kind="stable"):  # the strictest organ first
-        near = contains_keys(dilate_keys(keys[organs == named[group]], ORGAN_MARGIN_VOXELS), keys)
+        near = contains_keys(dilate_keys(keys[organs == named[group]], margin), keys)
         groups[near & (shares[groups] < shares[group])] = group
     return groups, tuple(shares)
 
