@@ -9,6 +9,7 @@ test here, or a test without a row, fails :func:`test_every_row_of_the_table_has
 from __future__ import annotations
 
 import gzip
+import importlib.util
 import json
 import os
 import re
@@ -30,6 +31,8 @@ from tpvp.scene.samples import sample_path
 ROOT = Path(__file__).resolve().parent.parent
 DOC = ROOT / "docs" / "messages.md"
 ROWS = {}
+DATA_TOOLS_ROWS = ("kaggle-credentials", "data-tools-output-inside-input", "capture-unknown-layout",
+                   "capture-depth-units", "helios-unknown-species")  # python -m data_tools, not tpvp
 
 
 def row(test_id: str, exit_status: int, *expected: str, stream: str = "err"):
@@ -352,6 +355,64 @@ def _(tmp, capsys):
 
 
 # --------------------------------------------------------------------------------------------------
+# phone captures, exports, organs and Helios (data_tools capture / helios, tpvp export, --organ-targets)
+
+
+@row("capture-unknown-layout", 2, "data_tools capture fuse: error:", "cannot tell the capture's format",
+     "name it with --format nerfstudio|polycam|depth")
+def _(tmp, capsys):
+    (tmp / "export").mkdir()
+    (tmp / "export" / "readme.txt").write_text("not a capture")
+    return run_cli(["capture", "fuse", tmp / "export", "--output", tmp / "cloud.ply"], capsys, entry=data_cli.main)
+
+
+@row("capture-depth-units", 2, "data_tools capture fuse: error:", "1000000.png: the median depth is",
+     "read at 1 m per unit", "are the units wrong? try --depth-scale 0.001")
+def _(tmp, capsys):
+    from data_tools.capture.standin import plant_scene, write_standin  # only these rows render a capture
+
+    folder = write_standin(tmp / "phone", "polycam", plant_scene("tomato", 0, size=0.4, frames=12), progress=False)
+    return run_cli(["capture", "fuse", folder, "--output", tmp / "cloud.ply", "--depth-scale", "1"], capsys,
+                   entry=data_cli.main)
+
+
+@row("export-not-rigid", 2, "tpvp export: error:", "base.json", "not a rigid transform")
+def _(tmp, capsys):
+    from tpvp.io.plan import plan_table, write_plan  # only this row writes a plan by hand
+    from tpvp.sensor.camera import look_at_rotations, rotation_to_quaternion
+
+    positions, look_ats = np.array([[0.4, 0, 0.2], [0, 0.4, 0.2]]), np.zeros((2, 3))
+    quaternions = [rotation_to_quaternion(r) for r in look_at_rotations(positions, look_ats)]
+    write_plan(tmp / "run", {"scan": plan_table(positions, look_ats, quaternions, ["initial", "planned"])},
+               {"scan": "the scans' frame"})
+    (tmp / "base.json").write_text(json.dumps(np.diag([2.0, 2.0, 2.0, 1.0]).tolist()))
+    return run_cli(["export", "ros2", tmp / "run", "--base-from-scan", tmp / "base.json", "--output", tmp / "bag"],
+                   capsys)
+
+
+@row("organ-targets-malformed", 2, "tpvp plan: error: selection.organ_targets: 'fruit=1.5' is not ORGAN=SHARE",
+     "SHARE in [0, 1]")
+def _(tmp, scans, capsys):
+    return run_cli(plan(scans / "day1.xyz", scans / "day2.xyz", "--organ-targets", "fruit=1.5", output=tmp / "out"),
+                   capsys)
+
+
+@row("organ-targets-without-labels", 2, "tpvp plan: error: organ targets (fruit, leaf) need the previous model's "
+     "organ labels", "day1.xyz has none", "--labels organ|pheno4d")
+def _(tmp, scans, capsys):
+    return run_cli(plan(scans / "day1.xyz", scans / "day2.xyz", "--organ-targets", "fruit=1.0,leaf=0.95",
+                        output=tmp / "out"), capsys)
+
+
+@row("helios-unknown-species", 2, "data_tools helios: error: unknown species 'tomatoe'", "offers", "tomato")
+def _(tmp, capsys):
+    if importlib.util.find_spec("pyhelios") is None:
+        pytest.skip("pyhelios3d is not installed (environment.txt)")
+    return run_cli(["helios", "--species", "tomatoe", "--ages", "30", "--output", tmp / "helios"], capsys,
+                   entry=data_cli.main)
+
+
+# --------------------------------------------------------------------------------------------------
 # a real session (tpvp session ...)
 
 
@@ -477,7 +538,7 @@ def test_message(test_id, tmp_path, scans, capsys, monkeypatch, request):
     lines = err.strip().splitlines()
     if lines and lines[0].startswith("usage:"):
         lines = [line for line in lines if not line.startswith(("usage:", " "))]
-    prog = "data_tools" if test_id in ("kaggle-credentials", "data-tools-output-inside-input") else "tpvp"
+    prog = "data_tools" if test_id in DATA_TOOLS_ROWS else "tpvp"
     assert all(line.startswith((f"{prog}: warning: ", f"{prog} ", f"{prog}: interrupted")) for line in lines), err
     assert sum(": error: " in line for line in lines) == (exit_status in (1, 2, 3, 4)), err
     assert sum(": interrupted" in line for line in lines) == (exit_status == 130), err

@@ -582,6 +582,8 @@ def _build(cls, values: dict, prefix: str, defaults):
         return cls(**kwargs)
     except ConfigError as exc:
         where = prefix.rstrip(".") or "configuration"
+        if str(exc).startswith(f"{where}."):  # the message names its key already
+            raise
         raise ConfigError(f"{where}: {exc}") from None
 
 
