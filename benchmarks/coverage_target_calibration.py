@@ -90,14 +90,28 @@ def _weights_label(weights) -> str:
         + f" @{weights['near_voxels']:g}" + (" area" if weights["area"] else "")
 
 
+def selection_on_prediction(scene, config, shared, surface, target: float, overrides=None) -> tuple:
+    """``(views, true coverage, proven optimal)`` of the selection alone (no path) for planning
+    target ``target`` applied to the planning ``surface`` as it is (``planning_miss_ratio = 1``),
+    executed views included; ``overrides``: more configuration keys."""
+    from tpvp.experiments.single_plant import known
+    from tpvp.pipeline.plant import selection_problem
+    from tpvp.setcover.methods import select_views
+    from tpvp.visibility import coverage_ratio, covered_voxels
+
+    planned = with_overrides(config, {**(overrides or {}), "selection.coverage_target": target,
+                                      "selection.planning_miss_ratio": 1.0})
+    selection = select_views(selection_problem(known(scene), planned, shared, surface), planned.selection)
+    views = list(shared.executed) + [int(v) for v in selection.selected]
+    return len(views), coverage_ratio(covered_voxels(scene.truth_visibility, views), scene.oracle), selection.optimal
+
+
 def _calibrate_case(case, targets, overrides) -> list[dict]:
     from tpvp.experiments.baselines import optimum
     from tpvp.experiments.single_plant import build_scene, known, transfer
-    from tpvp.pipeline.plant import planning_surface, selection_problem
+    from tpvp.pipeline.plant import planning_surface
     from tpvp.inflation.weights import surface_area, surface_classes
     from tpvp.pipeline.jit import compile_kernels
-    from tpvp.setcover.methods import select_views
-    from tpvp.visibility import coverage_ratio, covered_voxels
 
     compile_kernels()
     config = case.config(make_config("plant", overrides))
@@ -117,14 +131,9 @@ def _calibrate_case(case, targets, overrides) -> list[dict]:
         surface = replace(surface, classes=classes)
         shares = np.bincount(classes, minlength=4) / len(classes)
         for target in targets:
-            planned = with_overrides(config, {**weighting, "selection.coverage_target": target,
-                                              "selection.planning_miss_ratio": 1.0})
-            selection = select_views(selection_problem(known(scene), planned, shared, surface), planned.selection)
-            views = list(shared.executed) + [int(v) for v in selection.selected]
+            views, coverage, optimal = selection_on_prediction(scene, config, shared, surface, target, weighting)
             rows.append({**case.labels(), "weights": _weights_label(weights), "target": target,
-                         "views": len(views), "optimum_views": best,
-                         "coverage": coverage_ratio(covered_voxels(scene.truth_visibility, views), scene.oracle),
-                         "optimal": selection.optimal,
+                         "views": views, "optimum_views": best, "coverage": coverage, "optimal": optimal,
                          **{f"share_{name}": share for name, share in zip(("observed", "near", "far", "inflation"),
                                                                           shares)}})
     return rows

@@ -37,9 +37,10 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from tpvp.config import make_config, with_overrides
+from tpvp.config import make_config
 from tpvp.experiments import plants
 from tpvp.parallel import run_cases
+from coverage_target_calibration import selection_on_prediction
 from results_file import write_results
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -72,20 +73,18 @@ def _features(scene, config, shared, surface) -> dict:
     from scipy import sparse
 
     from tpvp.inflation.weights import surface_classes
+    from tpvp.visibility import coverage_ratio, covered_voxels, oracle_voxels
 
     resolution = config.selection.cover_resolution
     alignment = shared.alignment
     distance = cKDTree(alignment.warped).query(shared.coarse)[0]
     classes = surface_classes(surface.grid.keys, resolution, alignment.warped, shared.coarse, 2 * resolution)
     matrix = sparse.csr_matrix(surface.visibility)
-    coverable = np.zeros(matrix.shape[1], dtype=bool)
-    coverable[matrix.indices] = True
-    seen = np.zeros(matrix.shape[1], dtype=bool)
-    seen[matrix[list(shared.executed)].indices] = True
-    shares = np.bincount(classes[coverable], minlength=4) / coverable.sum()
+    coverable = oracle_voxels(matrix)
+    shares = np.bincount(classes[coverable], minlength=4) / len(coverable)
     return {"fit": alignment.chamfer_after / config.scene.largest_side,
             "unexplained": float((distance > resolution).mean()),
-            "warm_up_planning": float(seen[coverable].mean()),
+            "warm_up_planning": coverage_ratio(covered_voxels(matrix, shared.executed), coverable),
             **{f"share_{name}": share for name, share in zip(("observed", "near", "far", "inflation"), shares)}}
 
 
@@ -95,10 +94,8 @@ def calibration_rows(case, targets=TARGETS, margins=MARGINS) -> list:
     from tpvp.experiments.baselines import optimum
     from tpvp.experiments.single_plant import build_scene, known, run_case, transfer
     from tpvp.pipeline.jit import compile_kernels
-    from tpvp.pipeline.plant import planning_surface, selection_problem
+    from tpvp.pipeline.plant import planning_surface
     from tpvp.scene.organs import CODE
-    from tpvp.setcover.methods import select_views
-    from tpvp.visibility import coverage_ratio, covered_voxels
 
     compile_kernels()
     config = case.config(make_config("plant"))
@@ -109,11 +106,8 @@ def calibration_rows(case, targets=TARGETS, margins=MARGINS) -> list:
               "optimum_views": int(optimum(scene, config, targets=(ASKED,))["views"].iloc[0])}
     rows = []
     for target in targets:
-        planned = with_overrides(config, {"selection.coverage_target": target, "selection.planning_miss_ratio": 1.0})
-        selection = select_views(selection_problem(known(scene), planned, shared, surface), planned.selection)
-        views = list(shared.executed) + [int(v) for v in selection.selected]
-        rows.append({**labels, "kind": "target", "target": target, "views": len(views),
-                     "coverage": coverage_ratio(covered_voxels(scene.truth_visibility, views), scene.oracle)})
+        views, coverage, _ = selection_on_prediction(scene, config, shared, surface, target)
+        rows.append({**labels, "kind": "target", "target": target, "views": views, "coverage": coverage})
     if scene.previous_organs is not None and (scene.previous_organs == CODE["fruit"]).any():
         for margin in margins:
             organ = replace(config, selection=replace(config.selection, organ_targets=ORGAN_TARGETS,

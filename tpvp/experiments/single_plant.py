@@ -19,7 +19,7 @@ from tpvp.nbv.warm_up import start_nbv, warm_up
 from tpvp.pipeline.plant import CaseResult, Known, PlanningSurface, Transfer, plan, planning_surface
 from tpvp.pipeline.plant import transfer as transfer_known
 from tpvp.pipeline.replan import prediction_of, replan
-from tpvp.scene.organs import CODE, ORGANS
+from tpvp.scene.organs import organ_shares
 from tpvp.scene.simulator import Scene, build_scene, observation  # noqa: F401 (callers build the case's scene here)
 from tpvp.visibility import coverage_ratio, covered_voxels
 
@@ -82,9 +82,9 @@ def organ_coverage(scene: Scene, covered) -> dict:
     today's scan is not labelled."""
     if scene.voxel_organs is None:
         return {}
-    organs = scene.voxel_organs[scene.oracle]
-    return {ORGANS[code]: coverage_ratio(covered, scene.oracle[organs == code])
-            for code in np.unique(organs) if code != CODE["unknown"]}
+    shares = organ_shares(covered, scene.oracle, scene.voxel_organs)
+    shares.pop("unknown", None)
+    return shares
 
 
 def execute_replanning(scene: Scene, config: PlantConfig, transferred: Transfer, result: CaseResult,

@@ -27,9 +27,10 @@ from tpvp.pipeline.result import PlanResult
 from tpvp.pipeline.surface import planning_visibility
 from tpvp.pipeline.timing import timed
 from tpvp.registration.methods import register
-from tpvp.scene.organs import CODE, ORGANS, voxel_organs
+from tpvp.scene.organs import CODE, organ_shares, voxel_organs
 from tpvp.scene.voxels import contains_keys, dilate_keys
 from tpvp.setcover.methods import SelectionProblem, select_views
+from tpvp.visibility import covered_voxels, oracle_voxels
 
 
 #: The stages whose times make ``timings["planning"]`` (after the transfer).
@@ -265,12 +266,8 @@ def planning_organ_shares(problem, selection, organs) -> dict:
     if organs is None:
         return {}
     matrix = sparse.csr_matrix(problem.visibility)
-    coverable = np.zeros(matrix.shape[1], dtype=bool)
-    coverable[matrix.indices] = True
-    seen = np.zeros(matrix.shape[1], dtype=bool)
-    seen[matrix[list(problem.executed) + list(selection.selected)].indices] = True
-    return {ORGANS[code]: float(seen[coverable & (organs == code)].mean())
-            for code in np.unique(organs[coverable])}
+    views = [*problem.executed, *selection.selected]
+    return organ_shares(covered_voxels(matrix, views), oracle_voxels(matrix), organs)
 
 
 def _registration_warnings(known: Known, alignment, config: PlantConfig) -> list:

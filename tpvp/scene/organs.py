@@ -68,6 +68,14 @@ def voxel_organs(keys, resolution: float, points, organs) -> np.ndarray:
     return result
 
 
+def organ_shares(covered, ids, organs) -> dict:
+    """Organ -> the share of its voxels among ``ids`` (voxel ids: those some view can see) that are
+    in ``covered`` (voxel ids); ``organs``: the organ code of every voxel id."""
+    seen = np.isin(ids, covered)
+    codes = np.asarray(organs)[ids]
+    return {ORGANS[code]: float(seen[codes == code].mean()) for code in np.unique(codes)}
+
+
 def reduced_organs(reduced, points, organs, resolution: float):
     """The organ codes of ``reduced``, the voxel centroids at ``resolution`` of the labelled
     ``points`` (a scan reduced before planning): each centroid takes its voxel's majority; the
