@@ -154,8 +154,8 @@ def concurrent_try(pair: str, folder: Path, paths: dict, delay: float, pause: bo
 
 
 def _exported(folder: Path) -> bool:
-    """Whether export has begun writing its model (its temporary file beside the model)."""
-    return bool(list(folder.parent.glob(f".{folder.name}-today.*.tmp.ply")))
+    """Whether export has begun writing its model (the writer's temporary file of its staged file)."""
+    return bool(list(folder.parent.glob(f"*{folder.name}-today.ply.tpvp-staging-*")))
 
 
 def concurrent_ok(result: dict) -> list[str]:

@@ -115,18 +115,19 @@ def _capture_fuse(args) -> int:
     from data_tools.capture.formats import read_capture
     from data_tools.capture.fusion import fuse, fusion_config
     from tpvp.io import write_point_cloud
+    from tpvp.io.publish import staged_file
 
-    if args.output.exists() and not args.force:
-        raise TpvpError(f"{args.output} exists: pass --force to replace it")
     config = fusion_config(args.scale, voxel_size=args.voxel_size, truncation=args.truncation,
                            max_depth=args.max_depth, min_confidence=args.min_confidence, spacing=args.spacing,
                            support=args.support)
-    capture = read_capture(args.source, args.format, args.depth_scale)
-    print(f"{capture.folder}: {len(capture.frames)} frames ({capture.format}); fusing at {1000 * config.voxel_size:g} mm "
-          f"voxels, truncation {1000 * config.truncation:g} mm, depth up to {config.max_depth:g} m "
-          f"(--scale {args.scale})")
-    points, colours = fuse(capture, config)
-    write_point_cloud(args.output, points, colors=colours)
+    # Locked from the start, as a folder output is: a second run on the same file is refused at once.
+    with staged_file(args.output, inputs=[args.source], force=args.force) as staged:
+        capture = read_capture(args.source, args.format, args.depth_scale)
+        print(f"{capture.folder}: {len(capture.frames)} frames ({capture.format}); fusing at "
+              f"{1000 * config.voxel_size:g} mm voxels, truncation {1000 * config.truncation:g} mm, depth up to "
+              f"{config.max_depth:g} m (--scale {args.scale})")
+        points, colours = fuse(capture, config)
+        write_point_cloud(staged, points, colors=colours)
     print(f"wrote {args.output}: {len(points):,} surface points with colours (metres, the capture's world frame)")
     return 0
 

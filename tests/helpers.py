@@ -25,3 +25,17 @@ def benchmark_module(name: str):
     sys.modules[name] = module  # dataclasses look their module up there
     spec.loader.exec_module(module)
     return module
+
+
+def plan_folder(folder: Path) -> Path:
+    """A two-view plan written by hand (plan.csv, plan.json) in ``folder/run``."""
+    import numpy as np
+
+    from tpvp.io.plan import plan_table, write_plan
+    from tpvp.sensor.camera import look_at_rotations, rotation_to_quaternion
+
+    positions, look_ats = np.array([[0.4, 0, 0.2], [0, 0.4, 0.2]]), np.zeros((2, 3))
+    quaternions = [rotation_to_quaternion(r) for r in look_at_rotations(positions, look_ats)]
+    write_plan(folder / "run", {"scan": plan_table(positions, look_ats, quaternions, ["initial", "planned"])},
+               {"scan": "the scans' frame"})
+    return folder / "run"

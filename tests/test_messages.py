@@ -23,7 +23,7 @@ import numpy as np
 import pytest
 
 from data_tools import cli as data_cli
-from helpers import benchmark_module
+from helpers import benchmark_module, plan_folder
 from tpvp.cli import main
 from tpvp.errors import install_warning_format
 from tpvp.scene.samples import sample_path
@@ -315,6 +315,47 @@ def _(tmp, scans, capsys):
             return run_cli(plan(scans / "day1.xyz", scans / "day2.xyz", output=disk / "out"), capsys)
     except real_faults.Unavailable as exc:
         pytest.skip(str(exc))
+
+
+@row("output-is-input", 2, "tpvp export: error: output file", "is the input", "inputs are only read")
+def _(tmp, capsys):
+    run = plan_folder(tmp)
+    return run_cli(["export", "moveit", run, "--output", run / "plan.csv", "--force"], capsys)
+
+
+@row("output-file-exists", 2, "tpvp export: error: output file", "exists: choose a new one, or --force to replace it")
+def _(tmp, capsys):
+    run = plan_folder(tmp)
+    (tmp / "goals.yaml").write_text("mine\n")
+    return run_cli(["export", "moveit", run, "--output", tmp / "goals.yaml"], capsys)
+
+
+@row("output-file-busy", 3, "output file", "is being written by another run", "wait for it to finish")
+def _(tmp, capsys):
+    import fcntl
+
+    run = plan_folder(tmp)
+    with open(tmp / ".goals.yaml.tpvp-lock", "w") as lock:  # what a running export to goals.yaml holds
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        return run_cli(["export", "moveit", run, "--output", tmp / "goals.yaml"], capsys)
+
+
+@row("output-file-unwritable", 4, "tpvp export: error: cannot create", "nothing was written",
+     "choose a place you can write (--output)")
+def _(tmp, capsys):
+    run = plan_folder(tmp)
+    (tmp / "notes.txt").write_text("a file, not a folder\n")
+    return run_cli(["export", "moveit", run, "--output", tmp / "notes.txt" / "goals.yaml"], capsys)
+
+
+@row("output-file-disk-full", 4, "tpvp export: error: cannot write", "goals.yaml: No space left on device",
+     "nothing was written", "was not created")
+def _(tmp, capsys):
+    from tpvp.io import faults
+
+    run = plan_folder(tmp)
+    with faults.inject("enospc", 1):
+        return run_cli(["export", "moveit", run, "--output", tmp / "goals.yaml"], capsys)
 
 
 @row("interrupted-while-starting", 130, "tpvp: interrupted while starting; nothing was written")

@@ -133,6 +133,28 @@ def test_methods_sharing_a_registration_give_the_rows_of_separate_runs(raw, tiny
     before = runner.task_key(case, "ours", CONFIG)
     monkeypatch.setattr(runner, "RESULTS_VERSION", runner.RESULTS_VERSION + 1)
     assert runner.task_key(case, "ours", CONFIG) != before  # a change of results never reuses rows
+    before = runner.task_key(case, "ours", CONFIG)
+    monkeypatch.setattr(runner, "code_digest", lambda: "0" * 64)  # any change to the code
+    assert runner.task_key(case, "ours", CONFIG) != before  # a row of other code is never read back
+
+
+def test_the_code_digest_names_the_code(tmp_path):
+    from tpvp.provenance import code_digest, code_files
+
+    for folder in ("tpvp/data/results", "tpvp/__pycache__", "data_tools"):
+        (tmp_path / folder).mkdir(parents=True)
+    (tmp_path / "tpvp/stage.py").write_text("a = 1\n")
+    (tmp_path / "data_tools/grow.py").write_text("b = 2\n")
+    first = code_digest(tmp_path)
+    (tmp_path / "tpvp/data/results/table1.parquet").write_bytes(b"rows")  # results and byte code are not code
+    (tmp_path / "tpvp/__pycache__/stage.cpython-311.pyc").write_bytes(b"compiled")
+    code_digest.cache_clear()
+    assert code_digest(tmp_path) == first
+    assert [p.name for p in code_files(tmp_path)] == ["grow.py", "stage.py"]
+    (tmp_path / "tpvp/stage.py").write_text("a = 2\n")
+    code_digest.cache_clear()
+    assert code_digest(tmp_path) != first
+    code_digest.cache_clear()
 
 
 def test_bad_input_is_one_line(tmp_path, capsys):

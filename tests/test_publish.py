@@ -10,11 +10,11 @@ from pathlib import Path
 
 import pytest
 
-from helpers import tree_digest
+from helpers import plan_folder, tree_digest
 from tpvp.cli import main
 from tpvp.errors import BusyError, ConfigError, OutputWriteError
 from tpvp.io import atomic_write_text, faults
-from tpvp.io.publish import RUN_MARKER, RunInterrupted, staged_folder
+from tpvp.io.publish import RUN_MARKER, RunInterrupted, _lock, hold_folder, staged_file, staged_folder
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -186,3 +186,78 @@ def test_cli_disk_full_is_one_line_and_exit_4(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "No space left on device" in err[0] and "nothing was published" in err[0]
     assert str(out) in err[0] and not out.exists() and _leftovers(out) == []
+
+
+# -- one file outputs (staged_file) -------------------------------------------------------------------
+
+
+def test_a_file_output_is_locked_checked_and_replaced_whole(tmp_path):
+    out = tmp_path / "cloud.ply"
+    with staged_file(out) as staged:
+        staged.write_text("first\n")
+        assert not out.exists()  # nothing at the destination before the rename
+        with pytest.raises(BusyError, match="being written by another run"), staged_file(out, force=True):
+            pass
+    assert out.read_text() == "first\n"
+    with pytest.raises(ConfigError, match="exists: choose a new one, or --force"), staged_file(out):
+        pass
+    with pytest.raises(RuntimeError), staged_file(out, force=True) as staged:
+        staged.write_text("half")
+        raise RuntimeError("the writer failed")
+    assert out.read_text() == "first\n" and sorted(p.name for p in tmp_path.iterdir()) == [".cloud.ply.tpvp-lock",
+                                                                                               "cloud.ply"]
+    with staged_file(out, force=True) as staged:
+        staged.write_text("second\n")
+    assert out.read_text() == "second\n"
+
+
+@pytest.mark.parametrize("step", [1, 2, 3])
+def test_a_file_output_interrupted_is_old_or_new(tmp_path, step):
+    out = tmp_path / "goals.yaml"
+    out.write_text("old\n")
+    with pytest.raises(RunInterrupted) as caught, faults.inject("interrupt", step), \
+            staged_file(out, force=True) as staged:
+        atomic_write_text(staged, "new\n")
+    # step 1: the writer's own write, before the rename; 2: the rename (Ctrl-C held back, delivered
+    # after it); 3: just after it
+    assert caught.value.published == (step > 1)
+    assert out.read_text() == ("new\n" if step > 1 else "old\n")
+    assert [p.name for p in tmp_path.iterdir() if "staging" in p.name] == []
+
+
+def test_a_file_output_that_is_an_input_or_inside_one_is_refused(tmp_path):
+    capture = tmp_path / "capture"
+    (capture / "depth").mkdir(parents=True)
+    for out, inputs in [(capture / "cloud.ply", [capture]), (tmp_path / "plan.csv", [tmp_path / "plan.csv"])]:
+        with pytest.raises(ConfigError, match="inputs are only read"), staged_file(out, inputs=inputs):
+            pass
+    assert sorted(p.name for p in capture.iterdir()) == ["depth"]
+
+
+def test_a_symbolic_link_to_a_folder_takes_the_same_lock(tmp_path):
+    real, alias = tmp_path / "session", tmp_path / "alias"
+    real.mkdir()
+    alias.symlink_to(real)
+    with hold_folder(real, what="session folder"):  # another run through the alias: its own descriptor
+        with pytest.raises(BusyError, match="being written by another run"):
+            os.close(_lock(alias, "session folder"))
+    os.close(_lock(alias, "session folder"))  # released: the alias's lock is free again
+
+
+def test_an_export_onto_the_plan_it_reads_leaves_the_plan_as_it_was(tmp_path, capsys):
+    run = plan_folder(tmp_path)
+    before = (run / "plan.csv").read_bytes()
+    assert main(["export", "moveit", str(run), "--output", str(run / "plan.csv"), "--force"]) == 2
+    assert "is the input" in capsys.readouterr().err
+    assert (run / "plan.csv").read_bytes() == before
+
+
+def test_a_second_capture_fuse_into_one_file_is_refused_before_any_work(tmp_path, capsys):
+    from data_tools import cli as data_cli
+
+    out = tmp_path / "cloud.ply"
+    with staged_file(out) as staged:  # the first run, still fusing
+        assert data_cli.main(["capture", "fuse", str(tmp_path / "no-capture"), "--output", str(out)]) == 3
+        staged.write_text("the first run's cloud\n")
+    assert "is being written by another run" in capsys.readouterr().err
+    assert out.read_text() == "the first run's cloud\n"

@@ -6,12 +6,17 @@ one per plant. A task is a module-level function returning a list; results arriv
 
 from __future__ import annotations
 
+import gc
+import multiprocessing.util
+import os
+import signal
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from multiprocessing import get_context
 
 from tpvp.errors import ConfigError
 
 SCHEDULER_TIMEOUT_S = 30  # connecting to a Dask scheduler
+STOP_TIMEOUT_S = 5  # a terminated worker's time to exit before it is killed
 
 
 def run_cases(case_tasks, cases, arguments: tuple, tasks_per_case: int, workers: int = 1, scheduler=None,
@@ -42,15 +47,52 @@ def run_cases(case_tasks, cases, arguments: tuple, tasks_per_case: int, workers:
             for case in cases:
                 collect(case_tasks(case, *arguments))
         else:
-            with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("forkserver")) as pool:
+            pool = ProcessPoolExecutor(max_workers=workers, mp_context=get_context("forkserver"),
+                                       initializer=_worker_signals)
+            try:
                 futures = [pool.submit(case_tasks, case, *arguments) for case in cases]
                 for future in as_completed(futures):
                     collect(future.result())
+            except BaseException:
+                _stop(pool)
+                raise
+            pool.shutdown()
     finally:
         if own:
             client.close()
         bar.close()
     return tables
+
+
+def _stop(pool: ProcessPoolExecutor) -> None:
+    """End a pool at once (Ctrl-C, a failed task): pending tasks cancelled, running ones killed.
+    Shutting down as ``with`` does waits for the running tasks, minutes for a season's case;
+    what they had cached is whole (atomic writes), so a resumed run is exact."""
+    processes = list((getattr(pool, "_processes", None) or {}).values())
+    for process in processes:
+        process.terminate()
+    for process in processes:
+        process.join(timeout=STOP_TIMEOUT_S)
+        if process.is_alive():
+            process.kill()
+    # with its workers gone the pool's manager thread ends at once; waiting for it releases the
+    # queues' semaphores (else the resource tracker warns of leaked ones at exit)
+    pool.shutdown(wait=True, cancel_futures=True)
+    gc.collect()  # the queues' finalizers unlink their semaphores now: a Ctrl-C'd command ends with os._exit
+
+
+def _worker_signals() -> None:
+    """A worker's signals: Ctrl-C (sent to the whole terminal's process group) is left to the
+    parent, which ends the workers with SIGTERM (:func:`_stop`); on SIGTERM a worker runs its
+    finalizers before it exits, which unlink the semaphores numba and tqdm made in it (else the
+    resource tracker reports them as leaked)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, _exit_cleanly)
+
+
+def _exit_cleanly(signum, frame) -> None:
+    multiprocessing.util._exit_function()  # what a worker's normal exit runs
+    os._exit(128 + signum)
 
 
 def _connect(scheduler):

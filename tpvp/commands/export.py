@@ -10,7 +10,7 @@ import numpy as np
 from tpvp.config import load_config
 from tpvp.errors import ConfigError, InputFileError
 from tpvp.io import atomic_write_text
-from tpvp.io.publish import staged_folder
+from tpvp.io.publish import staged_file, staged_folder
 from tpvp.sensor.reconstruction import IMAGES, PLY_NAME, image_files, write_colmap, write_nerfstudio
 from tpvp.pipeline.robot import moveit_goals, plan_file, plan_poses, read_plan, read_transform
 from tpvp.pipeline.rosbag import SCAN_FRAME, TOPICS, check_frame, stamp_nanoseconds, write_plan_bag
@@ -24,9 +24,10 @@ def _transform(args) -> np.ndarray:
 
 
 def _moveit(args) -> int:
-    table = read_plan(args.plan)
-    written = atomic_write_text(args.output, moveit_goals(table, args.frame, _transform(args), str(args.plan)))
-    print(f"wrote {written} ({len(table)} pose goals in frame {args.frame!r})")
+    with staged_file(args.output, inputs=[plan_file(args.plan), args.base_from_scan], force=args.force) as staged:
+        table = read_plan(args.plan)
+        atomic_write_text(staged, moveit_goals(table, args.frame, _transform(args), str(args.plan)))
+    print(f"wrote {args.output} ({len(table)} pose goals in frame {args.frame!r})")
     return 0
 
 
@@ -116,6 +117,7 @@ def export_arguments(p) -> None:
     moveit = formats.add_parser("moveit", help="MoveIt pose goals (YAML) in the robot's base frame")
     _plan_options(moveit, "FILE", "the YAML file to write")
     moveit.add_argument("--frame", default="base_link", help="the base frame's name (default: %(default)s)")
+    moveit.add_argument("--force", action="store_true", help="replace an existing file (an earlier export)")
     moveit.set_defaults(func=_moveit)
 
     ros2 = formats.add_parser(

@@ -26,11 +26,12 @@ from tpvp.config import to_dict
 from tpvp.errors import ConfigError
 from tpvp.io import atomic_write_bytes
 from tpvp.parallel import run_cases
+from tpvp.provenance import code_digest
 from tpvp.registry import Registry, load_reference
 
-# Cached rows are keyed on the case, the method and the resolved configuration, not on the source:
-# a refactor keeps every cache. Bump this when a change alters any result (checked with
-# benchmarks/reference_outputs.sh + benchmarks/compare_outputs.py before and after).
+# Cached rows are keyed on the case, the method, the resolved configuration and the digest of the
+# code (tpvp.provenance.code_digest): a row computed by other code is never read back as this
+# code's. Bump this when the rows' meaning changes without a code change (e.g. a new column's data).
 RESULTS_VERSION = 2
 
 
@@ -72,9 +73,10 @@ def experiment_at(reference: str) -> Experiment:
 
 
 def task_key(case, method: str, config) -> str:
-    """The cache key of one (case, method): the case, the method and the case's resolved configuration."""
+    """The cache key of one (case, method): the case, the method, the case's resolved configuration
+    and the code that computes it."""
     payload = {"case": asdict(case), "method": method, "config": to_dict(case.config(config)),
-               "version": __version__, "results": RESULTS_VERSION}
+               "version": __version__, "results": RESULTS_VERSION, "code": code_digest()}
     return hashlib.sha256(json.dumps(payload, sort_keys=True, default=str).encode()).hexdigest()[:20]
 
 

@@ -23,6 +23,11 @@ A reader therefore sees the destination wholly old or wholly new. Nothing the co
 is deleted: a run folder may only replace a folder that is empty or holds a previous tpvp run's
 files and nothing else (``.tpvp-run.json`` lists them); inputs inside the destination are refused.
 
+A command that writes one file (``tpvp export moveit``, ``data_tools capture fuse``, ``tpvp session
+export``) goes through :func:`staged_file`: the same lock, the same check against its inputs, an
+existing file replaced only with ``--force``, the file written beside its destination and renamed
+onto it.
+
 A mount point cannot be renamed, so a destination that is one is published *in place*: the lock,
 the staging folder and the backup live inside it (``.tpvp-*``), and the commit swaps its entries
 rather than the folder, under a journal (``.tpvp-commit-<pid>``) that lets the next run roll a cut
@@ -44,7 +49,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Iterator
 
-from tpvp.errors import BusyError, ConfigError, InputFileError, OutputWriteError
+from tpvp.errors import BusyError, ConfigError, InputFileError, OutputWriteError, TpvpError
 from tpvp.io import faults
 from tpvp.io.atomic import fsync_path
 
@@ -52,6 +57,7 @@ RUN_MARKER = ".tpvp-run.json"
 _HELD = (signal.SIGINT, signal.SIGTERM)
 _WAIT_POLL_S = 0.05
 _ADVICE = "wait for it to finish or choose another folder"  # what a refused run is told to do
+_UNWRITABLE = "nothing was written: choose a place you can write (--output), or check its permissions"
 _locks: dict[str, int] = {}  # real path of a destination -> fd of the lock this process holds (hold_folder)
 # The command's step (arm_step): armed, the destination its commit published, signals that came after.
 _step = {"armed": False, "published": None, "signals": []}
@@ -151,11 +157,11 @@ def _lock(destination: Path, what: str, wait: float = 0.0, on_wait=None,
           advice: str = _ADVICE) -> int:
     """Take ``destination``'s lock, waiting up to ``wait`` seconds for another run to release it
     (``on_wait()`` is called once when it has to wait); :class:`BusyError` after that."""
-    lock = _sibling(destination, "lock")
+    lock = _sibling(Path(_lock_key(destination)), "lock")
     try:
         fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o666)
     except OSError as exc:
-        raise OutputWriteError(f"cannot write {what} {destination}: {exc.strerror or exc}") from None
+        raise OutputWriteError(f"cannot write {what} {destination}: {exc.strerror or exc}; {_UNWRITABLE}") from None
     deadline = time.monotonic() + wait
     while True:
         try:
@@ -284,7 +290,7 @@ def check_outputs_outside_inputs(destination, inputs, what: str = "output folder
             continue
         src = Path(item).resolve()
         if src == dest:
-            problem, fix = f"is the input {item}", f"choose another {what} outside {item}"
+            problem, fix = f"is the input {item}", f"choose another {what}" + (f" outside {item}" if src.is_dir() else "")
         elif dest in src.parents:
             problem, fix = f"holds the input {item}", f"choose another {what} that does not hold it, or move the input out"
         elif src in dest.parents:
@@ -459,6 +465,54 @@ def staged_folder(destination, *, keep_existing: bool = False, inputs=(), what: 
             shutil.rmtree(stage.folder, ignore_errors=True)
         if lock is not None:
             os.close(lock)  # releases the flock
+
+
+@contextlib.contextmanager
+def staged_file(destination, *, inputs=(), force: bool = False, what: str = "output file") -> Iterator[Path]:
+    """Lock the output file ``destination`` as :func:`staged_folder` locks a folder, refuse it when
+    it is an input or lies inside one, or exists without ``force``; yield a hidden path beside it
+    (same extension: writers choose the format by it) and rename that onto ``destination`` on
+    normal exit. On an error or Ctrl-C ``destination`` is left as it was; a write failure is an
+    :class:`OutputWriteError` (exit 4) that says so."""
+    destination = Path(destination).absolute()
+    check_outputs_outside_inputs(destination, inputs, what)
+    if destination.is_dir():
+        raise ConfigError(f"{what} {destination} is a folder: give the file to write")
+    _check_writable(destination, what)
+    try:
+        destination.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise OutputWriteError(f"cannot create {destination.parent}: {exc.strerror or exc}; {_UNWRITABLE}") from None
+    lock = _lock(destination, what)
+    staging = destination.with_name(f".{destination.name}.tpvp-staging-{os.getpid()}{destination.suffix}")
+    existed, published = destination.exists(), False
+    try:
+        for leftover in destination.parent.glob(f".{destination.name}.tpvp-staging-*"):
+            leftover.unlink(missing_ok=True)  # a crashed run's: we hold the lock
+        if existed and not force:  # checked under the lock: a concurrent run may have just written it
+            raise ConfigError(f"{what} {destination} exists: choose a new one, or --force to replace it")
+        yield staging
+        if not staging.is_file():
+            raise OutputWriteError(f"cannot write {destination}: the writer wrote nothing; {_UNWRITABLE}")
+        with _signals_held():
+            faults.checkpoint("commit")
+            os.replace(staging, destination)
+            published = True
+        fsync_path(destination.parent)
+        faults.checkpoint("published")
+    except KeyboardInterrupt:
+        raise RunInterrupted(destination, published, existed) from None
+    except OSError as exc:
+        if isinstance(exc, TpvpError) and (not isinstance(exc, InputFileError) or not _mentions(exc, destination)):
+            raise
+        text = str(exc) if isinstance(exc, InputFileError) else f"cannot write {destination}: {exc.strerror or exc}"
+        kept = f"{destination} is as it was" if existed else f"{destination} was not created"
+        raise OutputWriteError(f"{text.replace(str(staging), str(destination))}; nothing was written: {kept}") from None
+    finally:
+        if not published:
+            with contextlib.suppress(OSError):
+                staging.unlink()
+        os.close(lock)
 
 
 def _mentions(exc: BaseException, destination: Path) -> bool:

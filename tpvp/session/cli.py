@@ -19,7 +19,7 @@ from tpvp.cli_common import COVERAGE_TARGET_HELP, case_options, print_warnings, 
 from tpvp.config import parse_overrides
 from tpvp.errors import InputFileError, TpvpError
 from tpvp.io import read_point_cloud
-from tpvp.io.publish import RunInterrupted, armed_step, late_signals
+from tpvp.io.publish import RunInterrupted, armed_step, late_signals, staged_file
 from tpvp.io.units import plant_size_warning
 from tpvp.scene.boxes import ROOMS
 from tpvp.scene.organs import LABEL_KINDS, organ_codes
@@ -82,6 +82,7 @@ def session_arguments(session) -> None:
     export = steps.add_parser("export", help="write today's fused model (the next session's --previous)")
     export.add_argument("folder", type=Path, help="the session folder")
     export.add_argument("--model", required=True, type=Path, help="the model file to write (.ply/.pcd/.xyz)")
+    export.add_argument("--force", action="store_true", help="replace an existing model file (an earlier export)")
     _wait_option(export)
     export.set_defaults(func=_session_export)
     check = steps.add_parser("check", help="list every problem of a session folder (files gone or damaged, "
@@ -230,9 +231,10 @@ def _views_listed(views, shown: int = 12) -> str:
 
 
 def _session_export(args) -> int:
-    with _held(args) as session:
-        path = session.export(args.model)
-    print(f"wrote {path} (today's fused model, world frame)")
+    with _held(args) as session, staged_file(args.model, inputs=[args.folder], force=args.force,
+                                             what="model file") as staged:
+        session.export(staged)
+    print(f"wrote {args.model} (today's fused model, world frame)")
     return 0
 
 
