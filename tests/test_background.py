@@ -1,5 +1,6 @@
-"""Drawings beside the computation (tpvp.viz.background): the same files as drawn here, one line
-for a failed drawing, and a pool left early leaves no process behind."""
+"""Drawings beside the computation (tpvp.viz.background): the same files as drawn here (the
+recording read back with rerun: what was logged, entity by entity), one line for a failed drawing,
+and a pool left early leaves no process behind."""
 
 import multiprocessing
 
@@ -21,13 +22,58 @@ def unpicklable_failure():
     raise _Unpicklable
 
 
+POINTS = np.random.default_rng(0).random((500, 3))
+VIEWS = POINTS[:6] + 1.0
+
+
 def _calls(folder):
-    points = np.random.default_rng(0).random((500, 3))
-    views = points[:6] + 1.0
+    points, views = POINTS, VIEWS
     return [("tpvp.viz.figures:plot_plan", (folder / "plan.png", points, views, views[:1], views[1:], views), {}),
             ("tpvp.viz.figures:plot_coverage", (folder / "coverage.png", points, points[:, 0] > 0.1,
                                                  np.ones(len(points), bool)), {"title": "t"}),
-            ("tpvp.viz.recording:write_recording", (folder / "r.rrd",), {"clouds": {"p": (points, (1, 2, 3))}})]
+            ("tpvp.viz.recording:write_recording", (folder / "r.rrd",),
+             {"clouds": {"p": (points, (1, 2, 3))}, "cameras": {"views": (views, np.zeros(3))},
+              "paths": {"path": views}})]
+
+
+def read_recording(path) -> dict:
+    """Entity path -> {component column: its logged values} of every chunk of an ``.rrd`` (rerun's
+    own reader: rerun.chunk.RrdReader), with the number of rows logged on each entity."""
+    from rerun.chunk import RrdReader
+
+    entities = {}
+    for chunk in RrdReader(path).stream():
+        batch = chunk.to_record_batch()
+        entity = entities.setdefault(chunk.entity_path, {"rows": 0, "static": True})
+        entity["rows"] += chunk.num_rows
+        entity["static"] &= chunk.is_static
+        for name in batch.schema.names:
+            if not name.startswith("rerun.controls"):
+                entity[name] = batch.column(name).to_pylist()
+    return entities
+
+
+def check_recording(path):
+    """The recording holds the cloud, the six cameras and the path that _calls logged, and nothing else."""
+    from tpvp.sensor.camera import look_at_rotation
+
+    recording = read_recording(path)
+    cameras = [f"/world/views/{i:03d}" for i in range(len(VIEWS))]
+    assert set(recording) == {"/__properties", "/world", "/world/p", "/world/path", *cameras}
+    assert all(entity["static"] for entity in recording.values())
+    cloud = recording["/world/p"]
+    assert cloud["rows"] == 1
+    np.testing.assert_array_equal(cloud["Points3D:positions"][0], POINTS.astype(np.float32))
+    assert cloud["Points3D:colors"] == [[0x010203FF]]  # (1, 2, 3), opaque
+    for i, entity in enumerate(cameras):  # a pose and a pinhole each, at its view looking at the origin
+        camera = recording[entity]
+        assert camera["rows"] == 2
+        np.testing.assert_array_equal(camera["Transform3D:translation"][0], [VIEWS[i].astype(np.float32)])
+        np.testing.assert_allclose(np.reshape(camera["Transform3D:mat3x3"][0], (3, 3)).T,  # column-major
+                                   look_at_rotation(VIEWS[i], np.zeros(3)), atol=1e-6)
+        assert camera["Pinhole:resolution"] == [[[1280.0, 720.0]]]
+    (strip,) = recording["/world/path"]["LineStrips3D:strips"][0]
+    np.testing.assert_array_equal(strip, VIEWS.astype(np.float32))
 
 
 def test_the_pool_draws_the_files_drawn_here(tmp_path):
@@ -40,7 +86,8 @@ def test_the_pool_draws_the_files_drawn_here(tmp_path):
     assert [p.name for p in serial] == [p.name for p in pooled] == ["plan.png", "coverage.png", "r.rrd"]
     for name in ("plan.png", "coverage.png"):
         assert (here / name).read_bytes() == (there / name).read_bytes(), name
-    assert (there / "r.rrd").stat().st_size > 0
+    for folder in (here, there):
+        check_recording(folder / "r.rrd")
     assert multiprocessing.active_children() == []
 
 

@@ -5,6 +5,7 @@ the surface sampler against known areas and textures, and bad input refused with
 from __future__ import annotations
 
 import importlib.util
+import itertools
 import subprocess
 import sys
 
@@ -87,11 +88,18 @@ def test_the_same_seed_gives_the_same_bytes_and_another_seed_another_plant(datas
     first = read_point_cloud(dataset / "Tomato01" / "Tomato01_0131.ply", units="m")
     second = read_point_cloud(dataset / "Tomato02" / "Tomato02_0131.ply", units="m")
     assert len(first) != len(second) or not np.array_equal(first, second)
-    assert helios_seed(0, "tomato", 1) != helios_seed(1, "tomato", 1) != helios_seed(0, "sugarbeet", 1)
     other = prepare_helios(tmp_path / "other", ["tomato"], [30], HeliosConfig(spacing=0.005, seed=1),
                            progress=False)
     reseeded = read_point_cloud(tmp_path / "other" / other.file[0], units="m")
     assert len(reseeded) != len(first) or not np.array_equal(reseeded, first)
+
+
+def test_the_seed_the_species_and_the_plant_each_change_helios_seed():
+    """Every pair of (seed, species, plant) gets its own Helios seed, the same one each time."""
+    keys = [(0, "tomato", 1), (1, "tomato", 1), (0, "sugarbeet", 1), (0, "tomato", 2), (1, "sugarbeet", 2)]
+    seeds = {key: helios_seed(*key) for key in keys}
+    assert [(a, b) for a, b in itertools.combinations(keys, 2) if seeds[a] == seeds[b]] == []
+    assert all(0 <= seed < 2 ** 32 and seed == helios_seed(*key) for key, seed in seeds.items())
 
 
 @needs_helios

@@ -5,11 +5,13 @@ users see when the labels are missing or the targets malformed."""
 
 from __future__ import annotations
 
+from collections import Counter
 from dataclasses import replace
 
 import numpy as np
 import pandas as pd
 import pytest
+from scipy import sparse
 
 from tpvp.cli import main
 from tpvp.config import make_config
@@ -45,6 +47,66 @@ def test_voxel_organs_are_the_majority_of_their_points():
         assert code == expected
 
 
+def test_the_true_organ_coverage_of_a_scene_built_by_hand():
+    """Eight 1 cm voxels in a row, their labelled points and what three views see, all written out:
+    the true coverage per organ of each set of views is known by hand."""
+    from tpvp.experiments.single_plant import organ_coverage
+    from tpvp.scene.grid import build_grid
+    from tpvp.scene.simulator import Scene
+    from tpvp.visibility import covered_voxels, oracle_voxels
+
+    stem, leaf, petiole, unknown = CODE["stem"], CODE["leaf"], CODE["petiole"], CODE["unknown"]
+    resolution = 0.01
+    # voxel (x, 0, 0) -> the organs of the points in it; its organ is their majority (leaf on the
+    # leaf-petiole tie of x = 2: the lower code); x = 6 is the table (no labelled point); x = 7 is
+    # a stem voxel that no view sees
+    labels = {0: [stem] * 3, 1: [stem, stem, leaf], 2: [petiole, leaf], 3: [leaf, leaf], 4: [leaf],
+              5: [petiole, petiole, leaf], 6: [], 7: [stem]}
+    points = np.array([[(x + 0.1 + 0.2 * i) * resolution, 0.005, 0.005]
+                       for x, organs in labels.items() for i in range(len(organs))])
+    organs = np.array([code for codes in labels.values() for code in codes])
+    keys = np.array([[x, 0, 0] for x in labels])
+    grid = build_grid(keys, resolution, np.array([x != 6 for x in labels]))
+    ids = grid.ids_of(keys)  # voxel x -> its id in the grid
+    sees = {0: [0, 2, 6], 1: [1, 3, 4], 2: [3, 5]}  # view -> the voxels x it sees
+    rows = [view for view, xs in sees.items() for _ in xs]
+    truth = sparse.csr_matrix((np.ones(len(rows)), (rows, ids[[x for xs in sees.values() for x in xs]])),
+                              shape=(3, len(keys)))
+    scene = Scene(points, points, grid, None, None, truth, oracle_voxels(truth), np.eye(4), np.zeros((0, 3)),
+                  voxel_organs=voxel_organs(grid.keys, resolution, points, organs))
+    np.testing.assert_array_equal(scene.voxel_organs[ids], [stem, stem, leaf, leaf, leaf, petiole, unknown, stem])
+    np.testing.assert_array_equal(scene.oracle, np.sort(ids[:7]))
+
+    def coverage(views):
+        return organ_coverage(scene, covered_voxels(truth, views))
+
+    # stem: x 0, 1 (x 7 unseen by any view: not counted); leaf: x 2, 3, 4; petiole: x 5; the table: none
+    assert coverage([0, 2]) == {"stem": 1 / 2, "leaf": 2 / 3, "petiole": 1.0}
+    assert coverage([1]) == {"stem": 1 / 2, "leaf": 2 / 3, "petiole": 0.0}
+    assert coverage([2]) == {"stem": 0.0, "leaf": 1 / 3, "petiole": 1.0}
+    assert coverage([0, 1, 2]) == {"stem": 1.0, "leaf": 1.0, "petiole": 1.0}
+    assert coverage([]) == {"stem": 0.0, "leaf": 0.0, "petiole": 0.0}
+
+
+def true_organ_coverage(scene, point_organs, views, resolution) -> dict:
+    """Brute force of the true coverage per organ of ``views``: each ground-truth voxel some view
+    sees takes the most frequent organ of today's labelled points in it (the lowest code on ties;
+    the table's voxels hold none), and counts as covered when one of ``views`` sees it."""
+    assert len(scene.current) == len(point_organs)  # today's points as labelled: none reduced
+    votes = {}
+    for key, code in zip(map(tuple, np.floor(scene.current / resolution).astype(np.int64)), point_organs):
+        votes.setdefault(key, Counter())[int(code)] += 1
+    truth = sparse.csr_matrix(scene.truth_visibility)
+    seen = {int(i) for view in views for i in truth.indices[truth.indptr[view]:truth.indptr[view + 1]]}
+    flags = {}
+    for voxel in sorted(set(truth.indices.tolist())):
+        count = votes.get(tuple(scene.grid.keys[voxel]))
+        organ = min(count, key=lambda code: (-count[code], code)) if count else CODE["unknown"]
+        if organ != CODE["unknown"]:
+            flags.setdefault(ORGANS[organ], []).append(voxel in seen)
+    return {organ: sum(covered) / len(covered) for organ, covered in flags.items()}
+
+
 @pytest.fixture(scope="module")
 def labelled_scene():
     pair = generate_session_pair("tomato", 1)
@@ -65,14 +127,16 @@ def test_a_scene_carries_the_labels_of_both_sessions(labelled_scene):
 
 
 def test_organ_targets_are_met_on_the_predicted_surface_with_fewer_views(labelled_scene):
-    scene, _, _ = labelled_scene
+    scene, _, (_, current_organs) = labelled_scene
     config = make_config("plant")
     full = run_case(scene, config)
     targeted = run_case(scene, replace(config, selection=replace(config.selection, organ_targets="leaf=0.9")))
     assert targeted.planning_organs["leaf"] >= 0.9 and targeted.planning_organs["stem"] == 1.0
     assert targeted.n_views < full.n_views
-    assert set(full.organ_coverage) == {"stem", "leaf", "petiole"} and all(0 < v <= 1 for v in
-                                                                            full.organ_coverage.values())
+    # the true coverage per organ of the views each plan executed, against a brute force
+    assert set(full.organ_coverage) == {"stem", "leaf", "petiole"}
+    for result in (full, targeted):
+        assert result.organ_coverage == true_organ_coverage(scene, current_organs, result.order, config.gt_resolution)
     row = targeted.summary()
     assert row["coverage_leaf"] == targeted.organ_coverage["leaf"] and "planning_coverage_leaf" in row
 
