@@ -19,7 +19,10 @@ Printed: per source and view space, the smallest planning target whose mean true
 ratio (1 - planning) / (1 - 0.98), and its views per optimum; per source and view space and organ
 margin, the true fruit coverage (mean, lowest, cases at 99.5 % or more) and views, and the chosen
 margin: the most cases at 99.5 % over both view spaces, then the higher fruit mean, then fewer
-views. Every row goes to --output; --rows summarises such files instead of running.
+views. Every row goes to --output; --rows summarises such files instead of running. Every row and
+table records its split (``calibration``: the Helios evaluation dataset holds pairs of the same names)
+and the seed its plants come from (``seed``: a generated pair's seed, the Helios dataset's --helios-seed;
+rows of earlier files without the columns get them, no measured value changes).
 
 Usage:
     python -m data_tools helios --species tomato maize --ages ... --plants 3 --seed 1 --output DIR
@@ -39,6 +42,7 @@ import pandas as pd
 
 from tpvp.config import make_config
 from tpvp.experiments import plants
+from tpvp.experiments.species import HELIOS_SEEDS, seeds_of, with_split
 from tpvp.parallel import run_cases
 from coverage_target_calibration import selection_on_prediction
 from results_file import write_results
@@ -53,6 +57,7 @@ ORGAN_TARGETS = "fruit=1.0,leaf=0.95"
 FRUIT_ASKED = 0.995  # the issue's target for the true fruit coverage
 CALIBRATION_SPECIES = ("tomato", "maize")
 GENERATED_SEEDS = (10, 11, 12)
+SPLIT = "calibration"
 
 
 def calibration_cases(dataset, seeds=GENERATED_SEEDS) -> list:
@@ -123,9 +128,23 @@ def _group(raw: pd.DataFrame) -> np.ndarray:
     return np.where(raw["source"] == "dataset", "helios", "generated")
 
 
+def _labels(raw: pd.DataFrame) -> pd.DataFrame:
+    """``raw`` with its split and seed columns (:func:`tpvp.experiments.species.with_split`)."""
+    return with_split(raw, SPLIT, HELIOS_SEEDS[SPLIT]) if not {"split", "seed"} <= set(raw.columns) else raw
+
+
+def _splits(values) -> str:
+    return ",".join(sorted(set(values)))
+
+
+def _labels_first(table: pd.DataFrame) -> pd.DataFrame:
+    return table[["split", "seed", *[c for c in table.columns if c not in ("split", "seed")]]]
+
+
 def rule_table(raw: pd.DataFrame, asked=ASKED, margin=MARGIN) -> pd.DataFrame:
     """Per group (helios, generated, both) and view space: the smallest passing planning target."""
-    rows = raw[raw["kind"] == "target"].assign(ratio=lambda r: r["views"] / r["optimum_views"], group=_group)
+    rows = _labels(raw)
+    rows = rows[rows["kind"] == "target"].assign(ratio=lambda r: r["views"] / r["optimum_views"], group=_group)
     rows = pd.concat([rows, rows.assign(group="both")], ignore_index=True)
     out = []
     for (group, space), cases in rows.groupby(["group", "view_space"], sort=False):
@@ -134,7 +153,8 @@ def rule_table(raw: pd.DataFrame, asked=ASKED, margin=MARGIN) -> pd.DataFrame:
         ok = summary[(summary["coverage_mean"] >= asked + margin) & (summary["coverage_min"] >= asked - 0.01 + margin)]
         target = ok.index.min() if len(ok) else np.nan
         picked = summary.loc[target] if len(ok) else pd.Series(dtype=float)
-        out.append({"group": group, "view_space": space, "cases": int(summary["cases"].iloc[0]),
+        out.append({"split": _splits(cases["split"]), "seed": seeds_of(cases["seed"]),
+                    "group": group, "view_space": space, "cases": int(summary["cases"].iloc[0]),
                     "planning_target": target, "miss_ratio": (1 - target) / (1 - asked),
                     **{k: picked.get(k, np.nan) for k in ("views_per_optimum", "coverage_mean", "coverage_min")}})
     return pd.DataFrame(out)
@@ -142,20 +162,25 @@ def rule_table(raw: pd.DataFrame, asked=ASKED, margin=MARGIN) -> pd.DataFrame:
 
 def target_table(raw: pd.DataFrame) -> pd.DataFrame:
     """Per group, view space and planning target: views per optimum and true coverage."""
-    rows = raw[raw["kind"] == "target"].assign(ratio=lambda r: r["views"] / r["optimum_views"], group=_group)
+    rows = _labels(raw)
+    rows = rows[rows["kind"] == "target"].assign(ratio=lambda r: r["views"] / r["optimum_views"], group=_group)
     return rows.groupby(["group", "view_space", "target"]).agg(
+        split=("split", _splits), seed=("seed", seeds_of),
         cases=("views", "size"), views_per_optimum=("ratio", "mean"), coverage_mean=("coverage", "mean"),
-        coverage_min=("coverage", "min")).reset_index()
+        coverage_min=("coverage", "min")).reset_index().pipe(_labels_first)
 
 
 def margin_table(raw: pd.DataFrame) -> pd.DataFrame:
     """Per group, view space and organ margin: views and true fruit coverage."""
     if "margin" not in raw:
         return pd.DataFrame()
-    rows = raw[raw["kind"] == "organ"].assign(group=_group, reached=lambda r: r["fruit"] >= FRUIT_ASKED)
+    rows = _labels(raw)
+    rows = rows[rows["kind"] == "organ"].assign(group=_group, reached=lambda r: r["fruit"] >= FRUIT_ASKED)
     return rows.groupby(["group", "view_space", "margin"]).agg(
+        split=("split", _splits), seed=("seed", seeds_of),
         cases=("views", "size"), views=("views", "mean"), fruit_mean=("fruit", "mean"), fruit_min=("fruit", "min"),
-        cases_at_995=("reached", "sum"), leaf_mean=("leaf", "mean"), coverage=("coverage", "mean")).reset_index()
+        cases_at_995=("reached", "sum"), leaf_mean=("leaf", "mean"), coverage=("coverage", "mean")).reset_index(
+    ).pipe(_labels_first)
 
 
 def chosen_margin(margins: pd.DataFrame) -> pd.DataFrame:
@@ -173,6 +198,9 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--dataset", type=Path, default=None, help="the Helios calibration dataset (tomato, maize)")
     parser.add_argument("--seeds", nargs="*", type=int, default=list(GENERATED_SEEDS), help="generated seeds")
+    parser.add_argument("--helios-seed", type=int, default=HELIOS_SEEDS[SPLIT],
+                        help="the seed --dataset was grown from (python -m data_tools helios --seed; default: "
+                             "%(default)s); recorded in the rows' seed column")
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--output", default=None, help="CSV of every row")
     parser.add_argument("--rows", nargs="+", default=None, metavar="CSV",
@@ -182,11 +210,13 @@ def main() -> None:
     started = time.perf_counter()
     if args.rows:
         raw = pd.concat([pd.read_csv(path) for path in args.rows], ignore_index=True)
+        raw = with_split(raw, SPLIT, args.helios_seed) if "seed" not in raw else raw
         what = f"{raw['instance'].nunique()} pairs, {len(raw)} rows read from {', '.join(args.rows)}"
     else:
         cases = calibration_cases(args.dataset, args.seeds)
         raw = pd.concat(run_cases(calibration_rows, cases, (), 1, args.workers, desc="calibration"),
                         ignore_index=True)
+        raw = with_split(raw, SPLIT, args.helios_seed)
         what = (f"{len(cases)} cases (tomato and maize: the Helios dataset {args.dataset}, generated seeds "
                 f"{args.seeds}), {time.perf_counter() - started:.0f} s on {args.workers} workers")
     if args.output:

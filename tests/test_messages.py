@@ -32,7 +32,9 @@ ROOT = Path(__file__).resolve().parent.parent
 DOC = ROOT / "docs" / "messages.md"
 ROWS = {}
 DATA_TOOLS_ROWS = ("kaggle-credentials", "data-tools-output-inside-input", "capture-unknown-layout",
-                   "capture-depth-units", "helios-unknown-species")  # python -m data_tools, not tpvp
+                   "capture-depth-units", "capture-depth-units-one-frame", "capture-empty-depth-image",
+                   "capture-one-frame", "capture-pose-not-finite", "capture-frame-name",
+                   "helios-unknown-species")  # python -m data_tools, not tpvp
 
 
 def row(test_id: str, exit_status: int, *expected: str, stream: str = "err"):
@@ -407,14 +409,76 @@ def _(tmp, capsys):
     return run_cli(["capture", "fuse", tmp / "export", "--output", tmp / "cloud.ply"], capsys, entry=data_cli.main)
 
 
-@row("capture-depth-units", 2, "data_tools capture fuse: error:", "1000000.png: the median depth is",
-     "read at 1 m per unit", "are the units wrong? try --depth-scale 0.001")
+@row("capture-depth-units", 2, "data_tools capture fuse: error:", "1000000.png: frame 1000000's depth lies",
+     "read at 1 m per unit", "all 12 frames do: are the units wrong? try --depth-scale 0.001")
 def _(tmp, capsys):
     from data_tools.capture.standin import plant_scene, write_standin  # only these rows render a capture
 
     folder = write_standin(tmp / "phone", "polycam", plant_scene("tomato", 0, size=0.4, frames=12), progress=False)
     return run_cli(["capture", "fuse", folder, "--output", tmp / "cloud.ply", "--depth-scale", "1"], capsys,
                    entry=data_cli.main)
+
+
+def depth_capture(folder: Path, names=("000000", "000001", "000002"), depth_mm=500) -> Path:
+    """A small hand-written depth-folder capture: 32 x 24 depth planes ``depth_mm`` away (16-bit
+    PNG), poses 5 cm apart; the rows below fail before any fusion, so no rendered scene is needed."""
+    from PIL import Image
+
+    for sub in ("depth", "poses"):
+        (folder / sub).mkdir(parents=True, exist_ok=True)
+    (folder / "intrinsics.yaml").write_text("fx: 30\nfy: 30\ncx: 15.5\ncy: 11.5\nwidth: 32\nheight: 24\n")
+    for i, name in enumerate(names):
+        Image.fromarray(np.full((24, 32), depth_mm, dtype=np.uint16)).save(folder / "depth" / f"{name}.png")
+        pose = np.eye(4)
+        pose[0, 3] = 0.05 * i
+        np.savetxt(folder / "poses" / f"{name}.txt", pose)
+    return folder
+
+
+def fuse_cli(folder: Path, tmp: Path, capsys, *more):
+    return run_cli(["capture", "fuse", folder, "--output", tmp / "cloud.ply", *more], capsys, entry=data_cli.main)
+
+
+@row("capture-depth-units-one-frame", 2, "data_tools capture fuse: error:", "000001.png: frame 000001's depth lies "
+     "5 m away (its nearest tenth) read at 0.001 m per unit, outside the 0.1-1.5 m these settings fuse",
+     "while 2 of the 3 frames lie within", "0.0001 m per unit would fit it", "remove the frame")
+def _(tmp, capsys):
+    from PIL import Image
+
+    folder = depth_capture(tmp / "capture")
+    Image.fromarray(np.full((24, 32), 5000, dtype=np.uint16)).save(folder / "depth" / "000001.png")  # 10x: 0.1 mm
+    return fuse_cli(folder, tmp, capsys)
+
+
+@row("capture-empty-depth-image", 2, "data_tools capture fuse: error:", "000002.npy: frame 000002's depth image is "
+     "0 x 0 pixels (empty)", "export the frame again, or remove it")
+def _(tmp, capsys):
+    folder = depth_capture(tmp / "capture")
+    (folder / "depth" / "000002.png").unlink()
+    np.save(folder / "depth" / "000002.npy", np.zeros((0, 0)))
+    return fuse_cli(folder, tmp, capsys)
+
+
+@row("capture-one-frame", 2, "data_tools capture fuse: error:", "the capture holds 1 frame, and a surface is kept "
+     "only where more than 1 frame saw it", "fusion needs at least 2 frames that overlap")
+def _(tmp, capsys):
+    return fuse_cli(depth_capture(tmp / "capture", names=("000000",)), tmp, capsys)
+
+
+@row("capture-pose-not-finite", 2, "data_tools capture fuse: error:", "poses/000001.txt: frame 000001: line 2, "
+     "number 4 is nan (its translation's y)", "a pose must be finite numbers")
+def _(tmp, capsys):
+    folder = depth_capture(tmp / "capture")
+    pose = np.eye(4)
+    pose[1, 3] = np.nan
+    np.savetxt(folder / "poses" / "000001.txt", pose)
+    return fuse_cli(folder, tmp, capsys)
+
+
+@row("capture-frame-name", 2, "data_tools capture fuse: error:", "depth/frame 1.png: the frame name 'frame 1' holds "
+     "a space", "a frame name is letters, digits, '.', '-' and '_'", "(no spaces or slashes); rename the frame's files")
+def _(tmp, capsys):
+    return fuse_cli(depth_capture(tmp / "capture", names=("000000", "frame 1")), tmp, capsys)
 
 
 @row("export-not-rigid", 2, "tpvp export: error:", "base.json", "not a rigid transform")

@@ -22,11 +22,14 @@ Three layouts (:data:`FORMATS`), detected from the folder or named:
 A depth image smaller than the colour intrinsics (a phone's 256 x 192 LiDAR depth beside its
 1920 x 1440 image) uses them scaled by the size ratio; a depth image of another aspect ratio is
 refused. Depth is the distance along the camera's optical axis (0 or NaN: no measurement).
+
+Every frame's name (the stem of its files) follows one rule, :func:`check_frame_name`.
 """
 
 from __future__ import annotations
 
 import json
+import re
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -39,8 +42,10 @@ from tpvp.sensor.images import read_depth, read_intrinsics
 
 #: How far a pose may be from a rigid transform (phones write float32 poses).
 RIGID_TOLERANCE = 1e-4
-#: Depth a phone or depth camera can measure, metres: a median outside is a units mistake.
-PLAUSIBLE_DEPTH = (0.05, 20.0)
+#: A frame's name: letters, digits, '.', '-', '_', a letter or digit first (what phones and
+#: ns-process-data write): one word in a message or a shell, one file name in every folder.
+FRAME_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]*")
+FRAME_NAME_RULE = "a frame name is letters, digits, '.', '-' and '_', starting with a letter or digit"
 #: The z-up world ``ns-process-data`` makes of ARKit's y-up one: (x, y, z) -> (z, x, y).
 ARKIT_TO_Z_UP = np.array([[0, 0, 1, 0], [1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 0, 1]], dtype=np.float64)
 #: Confidence images with values above this hold 0-255 rather than ARKit's levels 0, 1, 2.
@@ -71,6 +76,22 @@ class Capture:
     frames: tuple[Frame, ...]
 
 
+def check_frame_name(name: str, source) -> str:
+    """``name`` when it is a frame name (:data:`FRAME_NAME`); else one line naming ``source`` (the
+    file that gives the name), the character at fault and the rule."""
+    if FRAME_NAME.fullmatch(name):
+        return name
+    if not name:
+        fault = "is empty"
+    elif not name[0].isascii() or not name[0].isalnum():
+        fault = f"starts with {name[0]!r}"
+    else:
+        char = next(c for c in name if not (c.isascii() and (c.isalnum() or c in "._-")))
+        fault = {" ": "holds a space", "/": "holds a slash", "\\": "holds a backslash"}.get(char, f"holds {char!r}")
+    raise InputFileError(f"{source}: the frame name {name!r} {fault}: {FRAME_NAME_RULE} (no spaces or slashes); "
+                         f"rename the frame's files")
+
+
 def detect_format(folder: Path) -> str:
     """The layout of a capture folder; one line saying what was expected when it is none."""
     if not folder.is_dir():
@@ -90,8 +111,9 @@ def detect_format(folder: Path) -> str:
 
 def read_capture(folder, fmt: str | None = None, depth_scale: float | None = None) -> Capture:
     """Every frame of the capture in ``folder`` (layout ``fmt``, detected when None), checked:
-    each frame's files exist and its pose is rigid. ``depth_scale`` (metres per depth unit)
-    replaces the layout's."""
+    each frame's name follows the rule, its files exist, its depth image's header gives a size
+    that fits its intrinsics, and its pose is finite and rigid. ``depth_scale`` (metres per depth
+    unit) replaces the layout's. The depth itself is checked by :func:`~data_tools.capture.fusion.frame_depths`."""
     folder = Path(folder)
     if fmt is None:
         fmt = detect_format(folder)
@@ -105,24 +127,28 @@ def read_capture(folder, fmt: str | None = None, depth_scale: float | None = Non
             raise InputFileError(f"--depth-scale must be > 0 (metres per depth unit), got {depth_scale!r}")
         frames = [replace(frame, depth_scale=depth_scale) for frame in frames]
     for frame in frames:
+        check_frame_name(frame.name, frame.depth)  # the readers check it where it is read: a safety net
         for path in (frame.depth, frame.image, frame.confidence):
             if path is not None and not path.is_file():
                 raise InputFileError(f"{path}: missing (frame {frame.name} names it); copy the whole export, or "
                                      f"remove the frame")
         depth_intrinsics(frame, _image_shape(frame.depth))
+        if not np.isfinite(frame.camera_to_world).all():  # the readers name the field; a reader's safety net
+            raise InputFileError(f"{folder}: frame {frame.name}'s pose holds NaN or infinite numbers: poses must be "
+                                 f"finite camera-to-world matrices in metres")
         error = rigid_error(frame.camera_to_world)
-        if not np.isfinite(frame.camera_to_world).all() or error > RIGID_TOLERANCE:
+        if error > RIGID_TOLERANCE:
             raise InputFileError(f"{folder}: frame {frame.name}'s pose is not a rigid transform (its rotation is off "
                                  f"a proper rotation by {error:.3g}): poses must be camera-to-world rotations and "
                                  f"translations in metres")
     return Capture(folder, fmt, tuple(frames))
 
 
-def _image_shape(path: Path) -> tuple[int, int]:
-    """(rows, columns) of an image or ``.npy`` array from its header, without reading its pixels."""
+def _image_shape(path: Path) -> tuple[int, ...]:
+    """(rows, columns) of an image, or a ``.npy`` array's shape, from its header, without reading its pixels."""
     try:
         if path.suffix.lower() == ".npy":
-            return np.load(path, mmap_mode="r", allow_pickle=False).shape[:2]
+            return np.load(path, mmap_mode="r", allow_pickle=False).shape
         from PIL import Image  # matplotlib's dependency
 
         with Image.open(path) as image:
@@ -142,7 +168,13 @@ def depth_intrinsics(frame: Frame, shape) -> Intrinsics:
     """The intrinsics of a depth image of ``shape`` (rows, columns): the frame's own, or scaled by
     the size ratio when the depth image is the colour image's at a lower resolution."""
     k = frame.intrinsics
+    if len(shape) != 2:
+        raise InputFileError(f"{frame.depth}: frame {frame.name}'s depth image has shape {tuple(shape)}: a depth "
+                             f"image is one channel of rows x columns; export the frame again, or remove it")
     height, width = shape
+    if min(width, height) == 0:  # an interrupted export: no pixel to fuse, and no size ratio to scale by
+        raise InputFileError(f"{frame.depth}: frame {frame.name}'s depth image is {width} x {height} pixels "
+                             f"(empty); export the frame again, or remove it")
     if (width, height) == (k.width, k.height):
         return k
     sx, sy = width / k.width, height / k.height
@@ -150,22 +182,6 @@ def depth_intrinsics(frame: Frame, shape) -> Intrinsics:
         raise InputFileError(f"{frame.depth}: the depth image is {width} x {height} pixels but the intrinsics say "
                              f"{k.width} x {k.height} (another aspect ratio): give the intrinsics of this camera")
     return k.resized(width, height)
-
-
-def check_depth_units(depth: np.ndarray, frame: Frame) -> None:
-    """Refuse a depth image whose median is not a distance a phone measures (a units mistake)."""
-    valid = depth[np.isfinite(depth)]
-    if valid.size == 0:
-        return
-    median = float(np.median(valid))
-    low, high = PLAUSIBLE_DEPTH
-    if low <= median <= high:
-        return
-    scale = frame.depth_scale or (0.001 if frame.depth.suffix.lower() == ".png" else 1.0)
-    factor = 0.001 if median > high else 1000.0
-    raise InputFileError(f"{frame.depth}: the median depth is {median:.4g} m read at {scale:g} m per unit, not a "
-                         f"distance a depth camera measures ({low:g}-{high:g} m): are the units wrong? try "
-                         f"--depth-scale {scale * factor:g}")
 
 
 def load_confidence(frame: Frame, shape) -> np.ndarray | None:
@@ -214,7 +230,7 @@ def _json(path: Path):
         raise InputFileError(f"{path}: not JSON ({exc})") from None
 
 
-def _number(data: dict, key: str, path: Path, where: str = "") -> float:
+def _number(data: dict, key: str, path: Path, where: str = "", finite: bool = True) -> float:
     try:
         value = float(data[key])
     except KeyError:
@@ -222,9 +238,21 @@ def _number(data: dict, key: str, path: Path, where: str = "") -> float:
                              f"h/height)") from None
     except (TypeError, ValueError):
         raise InputFileError(f"{path}: {where}'{key}' is not a number: {data[key]!r}") from None
-    if not np.isfinite(value):
+    if finite and not np.isfinite(value):
         raise InputFileError(f"{path}: {where}'{key}' is not finite")
     return value
+
+
+def _check_pose_finite(pose: np.ndarray, path: Path, where: str, field) -> None:
+    """Refuse a pose holding NaN or inf, naming the entry (``field(row, column)``) and its part:
+    checked before rigidity, which a NaN anywhere would make a rotation error."""
+    bad = np.argwhere(~np.isfinite(pose))
+    if len(bad) == 0:
+        return
+    r, c = bad[0]
+    part = "its last row" if r == 3 else f"its translation's {'xyz'[r]}" if c == 3 else "its rotation"
+    raise InputFileError(f"{path}: {where}{field(r, c)} is {pose[r, c]} ({part}): a pose must be finite numbers, "
+                         f"the camera-to-world matrix in metres; export the pose again, or remove the frame")
 
 
 def _pinhole(data: dict, path: Path, keys, where: str = "", centre: float = 0.0) -> Intrinsics:
@@ -254,16 +282,24 @@ def read_nerfstudio(folder: Path) -> list[Frame]:
         if "depth_file_path" not in entry:
             raise InputFileError(f"{path}: {where}no depth_file_path; fusion needs depth (ns-process-data writes it "
                                  f"for Polycam and Record3D captures)")
+        image, depth = entry.get("file_path"), entry["depth_file_path"]
+        for key, value in (("file_path", image), ("depth_file_path", depth)):
+            if (value is not None or key == "depth_file_path") and not (isinstance(value, str) and value):
+                raise InputFileError(f"{path}: {where}{key} must be a file's path, got {value!r}")
+            if value:  # the frame's name is its image's (or depth's) stem: each file's stem follows the rule
+                check_frame_name(Path(value).stem, f"{path}: {where}{key} {value!r}")
+        name = Path(image or depth).stem
+        where = f"frame {i} ({name}): "
         try:
             pose = np.asarray(entry["transform_matrix"], dtype=np.float64)
         except (KeyError, TypeError, ValueError):
             pose = np.zeros(0)
         if pose.shape != (4, 4):
             raise InputFileError(f"{path}: {where}transform_matrix must be a 4x4 matrix of numbers")
+        _check_pose_finite(pose, path, where, lambda r, c: f"transform_matrix[{r}][{c}]")
         intrinsics = _pinhole({**data, **entry}, path, NERFSTUDIO_INTRINSICS, where, PIXEL_CENTRE)
-        image = entry.get("file_path")
-        frames.append(Frame(Path(entry.get("file_path") or entry["depth_file_path"]).stem, folder / entry["depth_file_path"],
-                            switch_camera_axes(pose), intrinsics, image=folder / image if image else None))
+        frames.append(Frame(name, folder / depth, switch_camera_axes(pose), intrinsics,
+                            image=folder / image if image else None))
     return frames
 
 
@@ -282,13 +318,15 @@ def read_polycam(folder: Path) -> list[Frame]:
                              f"with images, cameras, depth and confidence)")
     frames = []
     for camera in sorted(cameras.glob("*.json"), key=_frame_order):
+        check_frame_name(camera.stem, camera)
         data = _json(camera)
         if not isinstance(data, dict):
             raise InputFileError(f"{camera}: not a Polycam camera (a mapping of fx, fy, cx, cy, width, height, t_00..t_23)")
         # ns-process-data copies Polycam's principal point as nerfstudio's: read it the same way
         intrinsics = _pinhole(data, camera, ("fx", "fy", "cx", "cy", "width", "height"), centre=PIXEL_CENTRE)
         pose = np.eye(4)
-        pose[:3] = [[_number(data, f"t_{r}{c}", camera) for c in range(4)] for r in range(3)]
+        pose[:3] = [[_number(data, f"t_{r}{c}", camera, finite=False) for c in range(4)] for r in range(3)]
+        _check_pose_finite(pose, camera, f"frame {camera.stem}: ", lambda r, c: f"t_{r}{c}")
         depth = root / "depth" / f"{camera.stem}.png"
         confidence = root / "confidence" / f"{camera.stem}.png"
         image = next((p for p in (images / f"{camera.stem}{s}" for s in (".jpg", ".jpeg", ".png")) if p.is_file()),
@@ -313,7 +351,7 @@ def _frame_order(path: Path):
     return (0, float(stem), stem) if stem.replace(".", "", 1).isdigit() else (1, 0.0, stem)
 
 
-def _read_pose(path: Path) -> np.ndarray:
+def _read_pose(path: Path, name: str) -> np.ndarray:
     try:
         pose = np.loadtxt(path, dtype=np.float64, ndmin=2)
     except (OSError, ValueError) as exc:
@@ -321,6 +359,7 @@ def _read_pose(path: Path) -> np.ndarray:
     if pose.shape != (4, 4):
         raise InputFileError(f"{path}: a pose is a 4x4 camera-to-world matrix (4 lines of 4 numbers), got "
                              f"{pose.shape[0]} x {pose.shape[1]}")
+    _check_pose_finite(pose, path, f"frame {name}: ", lambda r, c: f"line {r + 1}, number {c + 1}")
     return pose
 
 
@@ -334,6 +373,7 @@ def read_depth_folder(folder: Path) -> list[Frame]:
     poses = folder / ("poses" if (folder / "poses").is_dir() else "pose")
     frames = []
     for depth in depths:
+        check_frame_name(depth.stem, depth)
         pose = poses / f"{depth.stem}.txt"
         if not pose.is_file():
             raise InputFileError(f"{pose}: missing: every depth image needs its pose (poses/NAME.txt, a 4x4 "
@@ -341,7 +381,7 @@ def read_depth_folder(folder: Path) -> list[Frame]:
         image = next((p for p in (folder / "color" / f"{depth.stem}{s}" for s in (".png", ".jpg", ".jpeg"))
                       if p.is_file()), None)
         confidence = folder / "confidence" / f"{depth.stem}.png"
-        frames.append(Frame(depth.stem, depth, _read_pose(pose), intrinsics, depth_scale, image,
+        frames.append(Frame(depth.stem, depth, _read_pose(pose, depth.stem), intrinsics, depth_scale, image,
                             confidence if confidence.is_file() else None))
     return frames
 

@@ -7,6 +7,10 @@ crossings and its marching-cubes mesh sampled every ``spacing``); the points som
 measured (:func:`supported`) are the surface, in metres in the capture's world frame, with their
 colours. :data:`SCALES` holds the defaults of a single plant (5 mm voxels) and of
 a greenhouse row (1 cm).
+
+Before any fusion, :func:`frame_depths` reads and checks every frame (enough frames, image sizes,
+depth at the distances the scale fuses: :func:`depth_bounds`), so a bad frame is one line naming
+it and no frame without depth in range reaches Open3D.
 """
 
 from __future__ import annotations
@@ -15,13 +19,18 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from data_tools.capture.formats import Capture, check_depth_units, load_colour, load_confidence, load_depth
-from data_tools.errors import ConfigError, PointCloudError
+from data_tools.capture.formats import Capture, load_colour, load_confidence, load_depth
+from data_tools.errors import ConfigError, InputFileError, PointCloudError
 from tpvp.sensor.camera import project
 
 GREY = 128  # the colour of a frame without a colour image
 BLOCK_RESOLUTION = 8  # voxels along a block's side
 INITIAL_BLOCKS = 10_000  # the block hash map's first capacity (it grows)
+#: A frame's depth is judged by its nearest tenth (this percentile of its measured depth): the
+#: subject is the nearest thing a capture looks at; background beyond it (a room's walls) is not.
+NEAR_PERCENTILE = 10
+#: The nearest a subject is seen from, in voxels: nearer, a frame's whole view spans a few dozen.
+NEAREST_VOXELS = 20
 
 
 @dataclass(frozen=True)
@@ -40,6 +49,9 @@ class FusionConfig:
         for name in ("voxel_size", "truncation", "max_depth", "spacing", "support"):
             if getattr(self, name) is not None and not getattr(self, name) > 0:
                 raise ConfigError(f"fusion: {name} must be > 0 m, got {getattr(self, name)!r}")
+        if self.max_depth <= NEAREST_VOXELS * self.voxel_size:  # depth_bounds would be empty
+            raise ConfigError(f"fusion: max_depth ({self.max_depth} m) must be beyond {NEAREST_VOXELS} voxels "
+                              f"({NEAREST_VOXELS * self.voxel_size:g} m), the nearest a subject is fused from")
         if self.truncation < self.voxel_size:
             raise ConfigError(f"fusion: the truncation ({self.truncation} m) must be at least one voxel "
                               f"({self.voxel_size} m)")
@@ -63,12 +75,85 @@ def fusion_config(scale: str = "plant", **options) -> FusionConfig:
     return replace(SCALES[scale], **{k: v for k, v in options.items() if v is not None})
 
 
+def depth_bounds(config: FusionConfig) -> tuple[float, float]:
+    """Where a frame's nearest tenth of depth (:data:`NEAR_PERCENTILE`) must lie, metres, to be fused
+    at ``config``: from :data:`NEAREST_VOXELS` voxels to ``max_depth`` (a plant 0.1-1.5 m, a row
+    0.2-3 m). The range spans a factor 15, so depth 10 or more times off moves a frame out of it
+    unless the frame was seen from within a factor 1.5 of the range's ends."""
+    return NEAREST_VOXELS * config.voxel_size, config.max_depth
+
+
+def frames_needed(config: FusionConfig) -> int:
+    """The fewest frames a surface can come from: each frame adds weight 1 to the voxels it sees, and
+    a voxel is kept with more than ``min_weight``."""
+    return int(np.floor(config.min_weight)) + 1
+
+
+def frame_depths(capture: Capture, config: FusionConfig):
+    """Every frame's ``(depth, intrinsics)`` as the fusion integrates it (float32 metres, 0: none;
+    below the confidence floor and beyond ``max_depth`` dropped), all read and checked before any
+    fusion: enough frames (:func:`frames_needed`), images of their intrinsics' size, some depth in
+    every frame, and every frame's nearest tenth within :func:`depth_bounds` (else a units
+    mistake: one line naming the first such frame and the ``--depth-scale`` that fits it). So every
+    frame holds depth within ``max_depth``: Open3D aborts on a frame without any. No progress bar:
+    an error is then the only line on stderr (reading is a fraction of the fusion's time)."""
+    needed = frames_needed(config)
+    if len(capture.frames) < needed:
+        raise InputFileError(f"{capture.folder}: the capture holds {len(capture.frames)} frame"
+                             f"{'s' if len(capture.frames) != 1 else ''}, and a surface is kept only where more than "
+                             f"{config.min_weight:g} frame{'s' if config.min_weight != 1 else ''} saw it: fusion needs "
+                             f"at least {needed} frames that overlap (capture the subject from several places)")
+    low, high = depth_bounds(config)
+    depths, outside = [], []
+    for frame in capture.frames:
+        depth, k = load_depth(frame)
+        if not np.isfinite(depth).any():
+            raise InputFileError(f"{frame.depth}: frame {frame.name} holds no depth (every pixel is 0 or NaN); export "
+                                 f"the frame again, or remove it")
+        confidence = load_confidence(frame, depth.shape)
+        if confidence is not None:
+            depth[confidence < config.min_confidence] = np.nan
+        measured = depth[np.isfinite(depth)]
+        if measured.size == 0:
+            raise InputFileError(f"{frame.confidence}: frame {frame.name} holds no depth at confidence "
+                                 f"{config.min_confidence} or more: lower --min-confidence, or remove the frame")
+        near = float(np.percentile(measured, NEAR_PERCENTILE))
+        if not low <= near <= high:
+            outside.append((frame, near))
+        depth[~(depth <= config.max_depth)] = 0.0  # NaN and beyond the range: no measurement
+        depths.append((depth.astype(np.float32), k))
+    if outside:
+        raise _units_error(outside, len(capture.frames), low, high)
+    return depths
+
+
+def _units_error(outside, count: int, low: float, high: float) -> InputFileError:
+    """The line for frames whose nearest tenth lies outside ``low``-``high``: the first such frame,
+    the power of ten its depth would need, and whether ``--depth-scale`` (one for every frame) can
+    give it."""
+    frame, near = outside[0]
+    scale = frame.depth_scale or (0.001 if frame.depth.suffix.lower() == ".png" else 1.0)
+    power = round(np.log10(np.sqrt(low * high) / near))  # nearest the range's middle: within it if it spans 10x
+    fit = scale * 10.0**power
+    head = (f"{frame.depth}: frame {frame.name}'s depth lies {near:.3g} m away (its nearest tenth) read at {scale:g} m "
+            f"per unit, outside the {low:g}-{high:g} m these settings fuse ({NEAREST_VOXELS} voxels to --max-depth)")
+    if len(outside) == count:
+        # one power of ten too far may be a real distance, not units
+        farther = "; if it is that far, raise --max-depth" if power == -1 else ""
+        return InputFileError(f"{head}; all {count} frames do: are the units wrong? try --depth-scale {fit:g}{farther}")
+    return InputFileError(f"{head}, while {count - len(outside)} of the {count} frames lie within: if its units differ "
+                          f"from theirs, convert that file ({fit:g} m per unit would fit it; --depth-scale applies to "
+                          f"every frame), else remove the frame")
+
+
 def fuse(capture: Capture, config: FusionConfig = FusionConfig(), progress: bool = True):
     """``(points, colours)``: the fused surface of every frame, ``(N, 3)`` metres in the capture's
-    world frame and ``(N, 3)`` uint8 RGB."""
+    world frame and ``(N, 3)`` uint8 RGB. Every frame is read and checked first (:func:`frame_depths`)."""
     import open3d as o3d
     import open3d.core as o3c
     from tqdm.auto import tqdm
+
+    measured = frame_depths(capture, config)  # every frame's depth and intrinsics, checked
 
     # Open3D's tensor voxel-block grid (its hash map grows as blocks are touched); its legacy
     # ScalableTSDFVolume integrated nothing in open3d-cpu 0.20.
@@ -77,18 +162,11 @@ def fuse(capture: Capture, config: FusionConfig = FusionConfig(), progress: bool
         attr_channels=(1, 1, 3), voxel_size=config.voxel_size, block_resolution=BLOCK_RESOLUTION,
         block_count=INITIAL_BLOCKS, device=o3c.Device("CPU:0"))
     band = config.truncation / config.voxel_size  # Open3D's truncation, in voxels
-    measured = []  # every frame's depth (float32) and intrinsics, for the support check
-    check_depth_units(load_depth(capture.frames[0])[0], capture.frames[0])
-    for frame in tqdm(capture.frames, desc="fusing", unit="frame", disable=not progress):
-        depth, k = load_depth(frame)
-        confidence = load_confidence(frame, depth.shape)
-        if confidence is not None:
-            depth[confidence < config.min_confidence] = np.nan
-        depth[~(depth <= config.max_depth)] = 0.0  # NaN and beyond the range: no measurement
-        measured.append((depth.astype(np.float32), k))
+    frames = zip(capture.frames, measured)
+    for frame, (depth, k) in tqdm(frames, total=len(measured), desc="fusing", unit="frame", disable=not progress):
         colour = load_colour(frame, depth.shape)
         colour = np.full((*depth.shape, 3), GREY / 255.0) if colour is None else colour / 255.0
-        depth_image = o3d.t.geometry.Image(o3c.Tensor(depth.astype(np.float32)))
+        depth_image = o3d.t.geometry.Image(o3c.Tensor(depth))
         colour_image = o3d.t.geometry.Image(o3c.Tensor(np.ascontiguousarray(colour, dtype=np.float32)))
         intrinsic = o3c.Tensor(k.matrix())
         extrinsic = o3c.Tensor(np.linalg.inv(frame.camera_to_world))
@@ -96,10 +174,10 @@ def fuse(capture: Capture, config: FusionConfig = FusionConfig(), progress: bool
         volume.integrate(blocks, depth_image, colour_image, intrinsic, intrinsic, extrinsic, 1.0, config.max_depth,
                          band)
     points, colours = surface_samples(volume, config)
-    if len(points) == 0:
-        raise PointCloudError(f"{capture.folder}: the fusion found no surface: no frame has depth within "
-                              f"{config.max_depth} m at confidence {config.min_confidence} or more (--max-depth, "
-                              f"--min-confidence)")
+    if len(points) == 0:  # every frame has depth in range (frame_depths): their views do not meet
+        raise PointCloudError(f"{capture.folder}: the fusion found no surface: no voxel was seen by more than "
+                              f"{config.min_weight:g} of the {len(capture.frames)} frames, so their views do not "
+                              f"overlap: are the poses right (camera-to-world, metres)?")
     poses = [frame.camera_to_world for frame in capture.frames]
     kept = supported(points, poses, measured, config.support)
     if not kept.any():

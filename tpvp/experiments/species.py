@@ -88,6 +88,13 @@ ORGAN_TARGETS = "fruit=1.0,leaf=0.95"
 #: Where the Helios dataset of the species protocol lies (``python -m data_tools helios``, see
 #: :func:`helios_dataset`); the environment variable ``TPVP_HELIOS_DATASET`` names another.
 HELIOS_DATASET = Path("data") / "helios"
+#: The seed each split's Helios dataset was grown from (``python -m data_tools helios --seed S``): the
+#: evaluation dataset with the default 0, the calibration dataset with ``--seed 1`` (docs/results.md).
+#: The datasets write their seed only into their notice, and the rows of a case did not record it, so
+#: tables of such rows take it from here. Both splits hold pairs of the same names
+#: (``Maize01-2025-02-26-2025-03-01``): only the split and the seed tell them apart.
+HELIOS_SEEDS = {"evaluation": 0, "calibration": 1}
+SPLITS = tuple(HELIOS_SEEDS)
 GROW_COMMAND = ("python -m data_tools helios --species tomato strawberry soybean bean cowpea maize rice sugarbeet "
                 "--ages ... --plants 3 --output data/helios (benchmarks/helios_generation.py holds each species' ages)")
 
@@ -142,10 +149,45 @@ def species_rows(case) -> list:
     return [pd.DataFrame([row])]
 
 
-def species_tables(raw: pd.DataFrame) -> dict:
+def with_split(raw: pd.DataFrame, split: str, helios_seed: int | None = None) -> pd.DataFrame:
+    """``raw`` with the columns ``split`` (``calibration`` or ``evaluation``: which run the rows come
+    from) and ``seed`` (the seed the plant comes from: a generated pair's generator seed, a Helios
+    pair's dataset seed, :data:`HELIOS_SEEDS` of the split unless ``helios_seed``; none for the real
+    scans), after ``instance``. Columns the rows hold already are kept; no measured value changes."""
+    if split not in SPLITS:
+        raise ConfigError(f"split {split!r}: choose from {', '.join(SPLITS)}")
+    raw = raw.copy()
+    if "split" not in raw:
+        raw.insert(1, "split", split)
+    if "seed" not in raw:
+        generated = pd.to_numeric(raw["instance"].astype(str).str.extract(r"-generated-(\d+)$")[0], errors="coerce")
+        seed = pd.Series(pd.NA, index=raw.index, dtype="Int64")
+        seed[raw["source"] == "generated"] = generated[raw["source"] == "generated"].astype("Int64")
+        seed[raw["source"] == "dataset"] = HELIOS_SEEDS[split] if helios_seed is None else int(helios_seed)
+        raw.insert(2, "seed", seed)
+    return raw
+
+
+def seeds_of(values) -> str:
+    """A group's seeds as a table writes them (``0``, ``10,11,12``); empty for the real scans."""
+    return ",".join(str(s) for s in sorted({int(v) for v in values if pd.notna(v)}))
+
+
+def _with_seeds(table: pd.DataFrame, cases: pd.DataFrame, keys: list) -> pd.DataFrame:
+    """``table`` (grouped by ``keys``) with the split and the seeds of its cases as its first columns."""
+    labels = cases.groupby(keys, sort=True).agg(split=("split", lambda s: ",".join(sorted(set(s)))),
+                                                seed=("seed", seeds_of)).reset_index()
+    table = table.merge(labels, on=keys, how="left", validate="one_to_one")
+    return table[["split", "seed", *[c for c in table.columns if c not in ("split", "seed")]]]
+
+
+def species_tables(raw: pd.DataFrame, split: str = "evaluation", helios_seed: int | None = None) -> dict:
     """The species protocol's tables: the evaluation species (a dataset's but
     :data:`CALIBRATION_SPECIES`) per view space, the dataset's calibration species alike, every
-    species per view space with its organs, and the organ targets against the full cover."""
+    species per view space with its organs, and the organ targets against the full cover. Each
+    table's first columns say which run its rows are (``split``; the species protocol is the
+    evaluation) and the seeds its plants come from (``seed``, :func:`with_split`)."""
+    raw = with_split(raw, split, helios_seed)
     raw = raw.assign(ratio=raw["views"] / raw["optimum_views"], below_97=raw["coverage"] < 0.97,
                      species=np.where(raw["source"] == "dataset", "helios " + raw["species"],
                                       raw["source"] + " " + raw["species"]))
@@ -159,13 +201,14 @@ def species_tables(raw: pd.DataFrame) -> dict:
             cases_below_97=("below_97", "sum"), views_per_optimum=("ratio", "mean"),
             views=("views", "sum"), optimum=("optimum_views", "sum")).reset_index()
         table.insert(6, "ratio_of_means", table.pop("views") / table.pop("optimum"))
-        return table
+        return _with_seeds(table, cases, ["view_space"])
 
     overall, calibration_species = overall_of(helios[~calibration]), overall_of(helios[calibration])
     per_species = raw.groupby(["species", "view_space"]).agg(
         cases=("views", "size"), views=("views", "mean"), optimum=("optimum_views", "mean"),
         views_per_optimum=("ratio", "mean"), coverage_mean=("coverage", "mean"), coverage_min=("coverage", "min"),
         path_m=("path_length_m", "mean"), **{c.removeprefix("coverage_"): (c, "mean") for c in organs}).reset_index()
+    per_species = _with_seeds(per_species, raw, ["species", "view_space"])
     tables = {"overall": overall, "calibration_species": calibration_species, "per_species": per_species}
     if "organ_views" in raw:
         fruiting = raw[raw["organ_views"].notna()]
@@ -175,4 +218,5 @@ def species_tables(raw: pd.DataFrame) -> dict:
             full_cover_fruit=("full_fruit", "mean")).reset_index()
         saved = tables["organ_targets"]
         saved.insert(4, "views_saved", 1 - saved["organ_target_views"] / saved["full_cover_views"])
+        tables["organ_targets"] = _with_seeds(saved, fruiting, ["species", "view_space"])
     return tables
