@@ -1,23 +1,31 @@
-"""Every number the result pages quote is read back from its source (issue 47, "numbers in prose").
+"""Every number docs/results.md and README.md quote is read back from its source (issue 47, "numbers in prose").
 
-Design. :data:`SOURCES` maps each quoted number to where it comes from: per document and section, a
-list of ``(template, compute)``. A template is a piece of the page's text with each number replaced
-by ``#``; it must match exactly once in the section. ``compute()`` returns the numbers it stands for,
-computed from the shipped rows (``tpvp.experiments.shipped.shipped_rows``, read at test time), the
-benchmark outputs (``benchmarks/results``) or the protocol's definition in the code, each formatted
-with the rounding the page writes. The test fails on
+Design. :data:`SOURCES` partitions each page of :data:`DOCUMENTS` into regions (a section, or the lines from
+one start to the next) and gives each region its list of ``(template, compute)``. A template is a piece of
+the page's text with each number replaced by ``#`` (white space may break differently); it must match exactly
+once in its region. ``compute()`` returns the numbers it stands for, each formatted with the rounding the
+page writes (:func:`_f`: half up, as the pages round), computed from
 
-* a number in a covered section that no template covers (a new or moved quote without a source), and
-* a template whose numbers, as written, differ from what its source computes.
+* the shipped rows (``tpvp.experiments.shipped.shipped_rows``) through the tables the notebooks draw
+  (``plants.tables``, ``rows.tables``, ``season.tables``, ``species.species_tables``),
+* the benchmark outputs in ``benchmarks/results`` (which print 4 significant digits: a number written from
+  one is compared with :class:`Printed`), the learning metrics in ``tpvp/data/learning``, the paper's tables
+  in ``tpvp/data/paper``, ``provenance.json`` (refresh times, the machine), or
+* the code that defines the protocol (``make_config``, a benchmark's constants, the Helios seeds).
 
-Only the regions in :data:`SOURCES` (docs/results.md: the season section; of the species section the
-calibration bullets, both result tables, the generated / bundled sentence and the organ-target table;
-the coverage-target and re-planning evaluation tables) and the README rows of :data:`README_ROWS` are
-checked; the rest of both pages is not yet (issue 47). Benchmark outputs print 4 significant digits:
-a number written from one is compared with :class:`Printed`.
+A sentence that compares without a number of its own (``coverage rises monotonically ...``) is a template
+without ``#`` whose compute returns nothing while the comparison holds (:func:`_claim`).
 
-What is not a number here (:data:`IGNORED`, masked before the numbers are read): code spans (paths,
-commands, option values, notebook names) and link targets.
+The tests fail on a number outside every region, a number of a region that no template covers, a template
+found other than once, and a template whose numbers, as written, differ from its source. What no file of the
+repository holds is declared, not skipped: :class:`Unsourced` with one of three reasons (:data:`NOT_KEPT`:
+a run whose output no file keeps; :data:`EARLIER`: an earlier run the page tells as history; :data:`CODE_FACT`:
+a property of our or the authors' code stated in words), for a number, a template or a whole region, and
+:data:`UNSOURCED_AT_MOST` caps their count so that it can only shrink.
+
+What is not a number here (:data:`IGNORED`, :data:`IGNORED_IN`, masked before the numbers are read): code
+blocks and spans, link targets, dates, versions, issue numbers, a few names (3D, 4x4, cov@1), and the
+README's sentence on the test suite's duration and count.
 """
 
 from __future__ import annotations
@@ -31,39 +39,84 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from tpvp.experiments import season, shipped
+from tpvp.config import make_config
+from tpvp.experiments import plants, rows, season, shipped
 
 ROOT = Path(__file__).resolve().parent.parent
 NUMBER = r"\d+(?:,\d{3})*(?:\.\d+)?"
-#: Masked before numbers are read, each for the reason given.
+#: Masked before numbers are read, each for the reason given (in every document).
 IGNORED = (
+    (r"```.*?```", "fenced code blocks: commands and their comments"),
     (r"`[^`]*`", "code spans: paths, commands, option values, notebook names are names, not results"),
     (r"\]\([^)]*\)", "link targets: file names and anchors"),
+    (r"\b\d{4}-\d{2}-\d{2}\b", "dates"),
+    (r"\b\d+\.\d+\.\d+\b|\b(?:Python|ROS|Jupyter Book) \d+(?:\.\d+)?\b", "version numbers and versioned product names"),
+    (r"\b[Ii]ssues? \d+(?:\.\d+)?", "issue numbers"),
+    (r"\b\d+D\b|\b4x4\b|cov@1", "names: 3D, 6D, a 4x4 matrix, the measure cov@1"),
 )
+#: Masked in one document only.
+IGNORED_IN = {
+    "README.md": (
+        (r"^- `make test` runs.*?(?=^- )",
+         "the suite's duration and test count: measured on a busy machine and rewritten by the lead with each "
+         "release of the suite, not a result of tpvp's"),
+    ),
+}
 
 
-def _masked(text: str) -> str:
-    for pattern, _why in IGNORED:
-        text = re.sub(pattern, lambda m: " " * len(m.group(0)), text)
+def _masked(text: str, document: str | None = None) -> str:
+    for pattern, _why in IGNORED_IN.get(document, ()) + IGNORED:  # the document's own first: they may name code
+        text = re.sub(pattern, lambda m: re.sub(r"[^\n]", " ", m.group(0)), text, flags=re.S | re.M)
     return text
 
 
-def _section(document: str, heading) -> str:
-    """The text of ``heading`` (a markdown heading line) up to the next heading of its level or above;
-    or of a region ``(start, end)``: from the line starting with ``start`` to the line starting with ``end``."""
-    text = (ROOT / document).read_text()
-    if isinstance(heading, tuple):
-        lines = text.splitlines()
-        first = [i for i, line in enumerate(lines) if line.startswith(heading[0])]
-        assert len(first) == 1, heading
-        last = next(i for i in range(first[0] + 1, len(lines)) if lines[i].startswith(heading[1]))
-        return "\n".join(lines[first[0]:last])
-    level = len(heading) - len(heading.lstrip("#"))
-    lines = text.splitlines()
-    start = lines.index(heading)
-    end = next((i for i in range(start + 1, len(lines))
-                if re.match(rf"#{{1,{level}}} ", lines[i])), len(lines))
-    return "\n".join(lines[start + 1:end])
+def _span(document: str, region) -> tuple[int, int]:
+    """Where ``region`` lies in ``document`` (character offsets): a heading (a markdown heading line; its
+    section without the heading line, up to the next heading of its level or above) or ``(start, end)``:
+    from the line starting with ``start`` to the line before the next one starting with ``end`` (None: the
+    end of the document)."""
+    lines = (ROOT / document).read_text().splitlines(keepends=True)
+    offsets = [0]
+    for line in lines:
+        offsets.append(offsets[-1] + len(line))
+    if isinstance(region, tuple):
+        first = [i for i, line in enumerate(lines) if line.startswith(region[0])]
+        assert len(first) == 1, (document, region)
+        last = next((i for i in range(first[0] + 1, len(lines)) if region[1] and lines[i].startswith(region[1])),
+                    len(lines))
+        return offsets[first[0]], offsets[last]
+    level = len(region) - len(region.lstrip("#"))
+    start = [line.rstrip("\n") for line in lines].index(region)
+    end = next((i for i in range(start + 1, len(lines)) if re.match(rf"#{{1,{level}}} ", lines[i])), len(lines))
+    return offsets[start + 1], offsets[end]
+
+
+def _section(document: str, region) -> str:
+    start, end = _span(document, region)
+    return (ROOT / document).read_text()[start:end]
+
+
+class Unsourced:
+    """A number no file of the repository holds: the template covers it (it is declared, with the reason)
+    but nothing checks its value. As a template's compute it declares all the template's numbers; as an
+    item of a compute's list, that one number; as a region's sources, every number of the region.
+    :func:`test_the_unsourced_numbers_only_shrink` counts them."""
+
+    def __init__(self, why: str):
+        self.why = why
+
+    def __call__(self):
+        return self
+
+    def __repr__(self) -> str:
+        return f"unsourced ({self.why})"
+
+
+#: The reasons a quoted number has no source yet (the list of what remains for issue 47).
+NOT_KEPT = Unsourced("a run whose output no file of the repository keeps: a benchmark that writes no result "
+                     "file, a printout, a log, or the wall-clock time of a run")
+EARLIER = Unsourced("an earlier run's result that the page reports as history; replaced since, no file keeps it")
+CODE_FACT = Unsourced("a property of our or the authors' code stated in words, read there, not recomputed here")
 
 
 # ---------------------------------------------------------------- sources: the season (docs/results.md)
@@ -583,15 +636,24 @@ _SPECIES_ORGANS = [
 class Printed:
     """A value a benchmark output prints to 4 significant digits (``write_results``): a number written from it
     matches when the two roundings can hold the same value (the output alone cannot decide ``1.195`` -> 1.19 or
-    1.20, and reads ``97`` as 97.00)."""
+    1.20, and reads ``97`` as 97.00). The two intervals must overlap in more than a point: with as many decimals as
+    the output, the written number must be the printed one (98.37 is not 98.36, though both could round 98.365),
+    unless the value is a mean of whole numbers over ``cases`` and the point is such a mean, rounded half up by the
+    page (2512.5 voxels over 8 cases is printed 2512 and written 2,513)."""
 
-    def __init__(self, text: str, significant: int = 4):
-        self.text, self.value = text, float(text)
+    def __init__(self, text: str, significant: int = 4, cases: int | None = None):
+        self.text, self.value, self.cases = text, float(text), cases
         self.half = 0.0 if self.value == 0 else 0.5 * 10 ** (math.floor(math.log10(abs(self.value))) - significant + 1)
 
     def matches(self, written: str) -> bool:
         decimals = len(written.split(".")[1]) if "." in written else 0
-        return abs(float(written) - self.value) <= self.half + 0.5 * 10 ** -decimals + 1e-12
+        distance, limit = abs(float(written) - self.value), self.half + 0.5 * 10 ** -decimals
+        if distance < limit - 1e-9:
+            return True
+        # the one common point, a mean over the cases, rounded half up as the pages round: the written number's floor
+        point = self.value + self.half
+        return (abs(distance - limit) <= 1e-9 and float(written) > self.value and self.cases is not None
+                and abs(point * self.cases - round(point * self.cases)) < 1e-6)
 
     def __str__(self) -> str:
         return f"{self.text} (printed)"
@@ -688,6 +750,1288 @@ def _species_row() -> list[str]:
         f"{overall.loc[space, 'views_per_optimum']:.2f}")]
 
 
+# ---------------------------------------------------------------- sources: generic helpers
+def _f(value, digits: int = 2) -> str:
+    """``value`` rounded half up to ``digits`` decimals, as the pages round (Python's format rounds half to even:
+    154.25 -> 154.2, the page writes 154.3); the float's exact value decides, so 61.147 is 61.1."""
+    from decimal import ROUND_HALF_UP, Decimal
+
+    return str(Decimal(float(value)).quantize(Decimal(1).scaleb(-digits), rounding=ROUND_HALF_UP))
+
+
+def _hundred(text: str) -> str:
+    """A full coverage as the pages write it: 100, not 100.00."""
+    return "100" if re.fullmatch(r"100(?:\.0+)?", text) else text
+
+
+def _machine_cores() -> str:
+    """The cores of the machine every shipped protocol ran on, as provenance.json records it."""
+    machines = {entry["machine"] for entry in json.loads((ROOT / "tpvp" / "data" / "results" / "provenance.json")
+                                                         .read_text()).values()}
+    cores = {re.search(r"(\d+) cores", m).group(1) for m in machines}
+    return cores.pop() if len(cores) == 1 else f"machines differ: {machines}"
+
+
+def _md_header(name: str) -> str:
+    """The ``Made by ...`` line of benchmarks/results/NAME.md: the run in words (cases, seeds, seconds, workers)."""
+    return next(line for line in (ROOT / "benchmarks" / "results" / f"{name}.md").read_text().splitlines()
+                if line.startswith("Made by"))
+
+
+def _md_seconds(name: str) -> tuple[float, str]:
+    """The run's seconds and workers, as its header prints them."""
+    match = re.search(r"(\d+) s on (\d+) workers", _md_header(name))
+    return float(match.group(1)), match.group(2)
+
+
+def _md_minutes(name: str) -> list[str]:
+    seconds, workers = _md_seconds(name)
+    return [f"{seconds / 60:.0f}", workers]
+
+
+def _md_seeds(name: str) -> list[str]:
+    seeds = [int(s) for s in re.search(r"seeds \[([\d, ]+)\]", _md_header(name)).group(1).split(",")]
+    return [str(min(seeds)), str(max(seeds))]
+
+
+def _md_all_tables(name: str) -> list[list[dict]]:
+    """Every table of benchmarks/results/NAME.md in order, each a list of row dicts by its header."""
+    tables, header = [], None
+    for line in (ROOT / "benchmarks" / "results" / f"{name}.md").read_text().splitlines():
+        if not line.startswith("|"):
+            header = None
+            continue
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        if header is None:
+            header = cells
+            tables.append([])
+        elif not set("".join(cells)) <= set("-: "):
+            tables[-1].append(dict(zip(header, cells)))
+    return tables
+
+
+# ---------------------------------------------------------------- sources: individual plants (docs/results.md)
+@lru_cache(maxsize=None)
+def _plant_tables(name: str = "table1") -> dict:
+    return plants.tables(shipped.shipped_rows(name))
+
+
+def _t1(source: str, space: str, method: str, budget=None, target=None, name: str = "table1") -> pd.Series:
+    t = _plant_tables(name)["table1_coverage_effort"]
+    t = t[(t["source"] == source) & (t["view_space"] == space) & (t["method"] == method)]
+    if budget is not None:
+        t = t[t["budget"] == budget]
+    if target is not None:
+        t = t[t["target"] == target]
+    assert len(t) == 1, (source, space, method, budget, target)
+    return t.iloc[0]
+
+
+def _paper_plant(table: str, view_space: str, method: str, species: str = "all", budget=None) -> pd.Series:
+    p = plants.paper_values()
+    p = p[(p["table"] == table) & (p["view_space"] == view_space) & (p["method"] == method) & (p["species"] == species)]
+    if budget is not None:
+        p = p[p["budget"] == budget]
+    assert len(p) == 1, (table, view_space, method, species, budget)
+    return p.iloc[0]
+
+
+def _mean_std(row: pd.Series, columns=("views", "coverage", "path_length_m")) -> list[str]:
+    return [_f(row[f"{c}_{s}"]) for c in columns for s in ("mean", "std")]
+
+
+def _plants_protocol() -> list[str]:
+    r = shipped.shipped_rows("table1")
+    ours = r[r["method"] == "ours"]
+    g, b = ours[ours["source"] == "generated"], ours[ours["source"] == "bundled"]
+    spaces = ours["view_space"].nunique()
+    species = g["species"].nunique()
+    return [str(species), str(g["instance"].nunique() // species), str(g["rotation_deg"].nunique()),
+            str(g["initial_view"].nunique()), str(len(g) // spaces), str(len(b) // spaces), str(len(ours)),
+            str(len(plants.PLANT_METHODS.defaults()))]
+
+
+def _ours_row(source: str, space: str, name: str = "table1", method: str = "ours", paper: str | None = "ours") -> list:
+    out = _mean_std(_t1(source, space, method, name=name))
+    if paper:
+        p = _paper_plant("I", space, paper)
+        out += [_f(p["views_mean"]), _f(p["coverage_mean"]), _f(p["path_mean"])]
+    return out
+
+
+def _gmc_row(space: str, source: str = "generated", paper: bool = True) -> list:
+    budgets = plants.GMC_BUDGETS
+    rows = [_t1(source, space, "gmc", budget=b) for b in budgets]
+    out = ([str(b) for b in budgets] + [_f(r["coverage_mean"]) for r in rows]
+           + [_f(r["path_length_m_mean"]) for r in rows])
+    if paper:
+        p = [_paper_plant("I", space, "gmc", budget=b) for b in budgets]
+        out += [_f(r["coverage_mean"]) for r in p] + [_f(r["path_mean"]) for r in p]
+    return out
+
+
+def _optimum_row(space: str) -> list:
+    rows = [_t1("generated", space, "optimum", target=t) for t in (0.98, 1.0)]
+    return ([f"{100 * t:g}" for t in (0.98, 1.0)] + [_f(r["views_mean"]) for r in rows]
+            + [_hundred(_f(r["coverage_mean"])) for r in rows] + [_f(r["path_length_m_mean"]) for r in rows])
+
+
+def _optimum_ratio(source: str, space: str, column: str = "views_ratio_mean") -> str:
+    t = _plant_tables()["optimum_ratio"]
+    t = t[(t["source"] == source) & (t["view_space"] == space) & (t["method"] == "ours")]
+    return _f(t[column].iloc[0])
+
+
+def _table2(species_name: str, space: str) -> str:
+    t = _plant_tables("table2")["table2_plant_complexity"]
+    t = t[(t["source"] == "generated") & (t["species"] == species_name) & (t["view_space"] == space)]
+    return _f(t["views_mean"].iloc[0])
+
+
+def _table3(species_name: str, method: str, column: str) -> float:
+    t = _plant_tables("tables3_4")["table3_inflation"]
+    t = t[(t["source"] == "generated") & (t["species"] == species_name) & (t["method"] == method)]
+    return float(t[f"{column}_mean"].iloc[0])
+
+
+def _claim(holds: bool, what: str) -> list[str]:
+    """A sentence that compares without a number of its own: nothing to read back while it holds."""
+    return [] if holds else [f"no longer holds: {what}"]
+
+
+def _gmc_claim() -> list[str]:
+    ours = {s: [_t1("generated", s, "gmc", budget=b)["coverage_mean"] for b in plants.GMC_BUDGETS]
+            for s in ("hemisphere", "sphere")}
+    paper = {s: [_paper_plant("I", s, "gmc", budget=b)["coverage_mean"] for b in plants.GMC_BUDGETS] for s in ours}
+    gain = {s: [o - p for o, p in zip(ours[s], paper[s])] for s in ours}
+    more = all(g > 0 for s in gain for g in gain[s])
+    most_on_the_sphere = all(a > b for a, b in zip(gain["sphere"], gain["hemisphere"]))
+    return _claim(more and most_on_the_sphere,
+                  "GMC covers more than the paper's at every budget, by more on the sphere")
+
+
+def _species_claim() -> list[str]:
+    views = {(n, s): float(_table2(n, s)) for n in ("tomato", "maize") for s in ("hemisphere", "sphere")}
+    paper = {n: _paper_plant("II", "hemisphere", "ours", species=n)["views_mean"] for n in ("tomato", "maize")}
+    return _claim(views[("tomato", "hemisphere")] > views[("maize", "hemisphere")] and paper["tomato"] > paper["maize"]
+                  and views[("tomato", "sphere")] <= views[("maize", "sphere")],
+                  "tomato needs more views than maize on the hemisphere (as in the paper), not on the sphere")
+
+
+def _inflation() -> list[str]:
+    out = []
+    for name in ("tomato", "maize"):
+        out += [_f(_table3(name, m, "views")) for m in ("ours-no-inflation", "ours")]
+        out += [_f(_table3(name, m, "coverage")) for m in ("ours-no-inflation", "ours")]
+    paper = {name: {m: _paper_plant("III", "all", m, species=name) for m in ("ours-no-inflation", "ours")}
+             for name in ("tomato", "maize")}
+    views = {f"{p['ours']['views_mean'] - p['ours-no-inflation']['views_mean']:.0f}" for p in paper.values()}
+    out += [views.pop() if len(views) == 1 else f"paper views differ: {views}"]
+    out += [_f(p["ours"]["coverage_mean"] - p["ours-no-inflation"]["coverage_mean"], 1) for p in paper.values()]
+    return out
+
+
+def _table4() -> list[str]:
+    t = _plant_tables("tables3_4")["table4_registration"].set_index(["source", "method"])
+    g0, g1 = t.loc[("generated", "initial-view-only")], t.loc[("generated", "ours")]
+    b0, b1 = t.loc[("bundled", "initial-view-only")], t.loc[("bundled", "ours")]
+    return ([_f(g0["chamfer_truth_mm_mean"]), _f(g0["chamfer_truth_mm_std"]), _f(g1["chamfer_truth_mm_mean"]),
+             _f(g1["chamfer_truth_mm_std"]), _f(b0["chamfer_truth_mm_mean"]), _f(b1["chamfer_truth_mm_mean"])]
+            + [_f(_paper_plant("IV", "all", m)["chamfer_mean"]) for m in ("initial-view-only", "ours")])
+
+
+def _tie(value: float) -> str:
+    """Tie picks as the page writes them: 0 when none, two decimals under 0.1, else one."""
+    return "0" if value == 0 else f"{value:.2f}" if value < 0.1 else f"{value:.1f}"
+
+
+def _ties() -> list[str]:
+    r = shipped.shipped_rows("table1")
+    gmc = r[(r["method"] == "gmc") & r["budget"].isin(plants.GMC_BUDGETS)]
+    mean = gmc.groupby(["view_space", "budget"])["tie_picks"].mean()  # every case, generated and real
+    return ([_tie(mean[("hemisphere", b)]) for b in plants.GMC_BUDGETS] + [str(b) for b in plants.GMC_BUDGETS]
+            + [_tie(mean[("sphere", b)]) for b in plants.GMC_BUDGETS])
+
+
+def _gmc_gain_voxel() -> str:
+    rules = {row["rule"] for table in _md_all_tables("gmc_gain") for row in table if "rule" in row}
+    voxels = [re.fullmatch(r"(\d+) mm", rule).group(1) for rule in rules if re.fullmatch(r"\d+ mm", rule)]
+    return voxels[0] if len(voxels) == 1 else f"rules {rules}"
+
+
+def _planning_seconds() -> list[str]:
+    r = shipped.shipped_rows("table1")
+    mean = r[r["method"] == "ours"].groupby(["source", "view_space"])["seconds_planning"].mean()
+    return [_f(mean[(s, v)]) for s in ("generated", "bundled") for v in ("hemisphere", "sphere")]
+
+
+_PLANTS = [
+    ("per view space # species x # generated instances x # rotations x # initial views = # cases, plus the bundled "
+     "real tomato pair on its own # rows per view space: # cases, each with the # methods the command runs by default",
+     _plants_protocol),
+    ("A run of # of those methods took # min # s on # workers from an empty cache with the harder generated plants "
+     "(# min # s before them; # worker took #x as long)", NOT_KEPT),
+    ("| hemisphere | Ours, generated | # ± # | # ± # | # ± # | # / # / # |",
+     lambda: _ours_row("generated", "hemisphere")),
+    ("| hemisphere | Ours, real tomato | # ± # | # ± # | # ± # | |",
+     lambda: _ours_row("bundled", "hemisphere", paper=None)),
+    ("| hemisphere | GMC # / # / # / #, generated | | # / # / # / # | # / # / # / # | "
+     "# / # / # / # %, # / # / # / # m |",
+     lambda: _gmc_row("hemisphere")),
+    ("| hemisphere | exact optimum, # % / # % | # / # | # / # | # / # | (beyond the paper) |",
+     lambda: _optimum_row("hemisphere")),
+    ("| sphere | Ours, generated | # ± # | # ± # | # ± # | # / # / # |", lambda: _ours_row("generated", "sphere")),
+    ("| sphere | Ours, real tomato | # ± # | # ± # | # ± # | |", lambda: _ours_row("bundled", "sphere", paper=None)),
+    ("| sphere | GMC # / # / # / #, generated | | # / # / # / # | # / # / # / # | "
+     "# / # / # / # %, # / # / # / # m |",
+     lambda: _gmc_row("sphere")),
+    ("| sphere | exact optimum, # % / # % | # / # | # / # | # / # | |", lambda: _optimum_row("sphere")),
+    ("Ours spends #x (hemisphere) and #x (sphere) the views of the exact optimum for the coverage it actually reached "
+     "(generated pairs; #x / #x on the real tomato), and #x / #x the optimum for # %",
+     lambda: [_optimum_ratio("generated", "hemisphere"), _optimum_ratio("generated", "sphere"),
+              _optimum_ratio("bundled", "hemisphere"),
+              _optimum_ratio("bundled", "sphere"), _optimum_ratio("generated", "hemisphere", "views_ratio_98_mean"),
+              _optimum_ratio("generated", "sphere", "views_ratio_98_mean"), "98"]),
+    ("Plant complexity (Table II): generated tomato # views (hemisphere) -> # (sphere), maize # -> #",
+     lambda: [_table2(n, s) for n in ("tomato", "maize") for s in ("hemisphere", "sphere")]),
+    ("tomato needs more views than maize on the hemisphere, as in the paper, but not on the sphere", _species_claim),
+    ("GMC now covers more than the paper's GMC, most on the sphere", _gmc_claim),
+    ("Inflation (Table III, both view spaces): tomato # -> # views, # -> # %; maize # -> # views, # -> # % "
+     "(paper: +# view, +# / +# points)", _inflation),
+    ("lowers the Chamfer of the transferred model to the ground truth from # ± # to # ± # mm (Table IV; real tomato "
+     "# -> # mm; paper # -> # mm)", _table4),
+    ("(# cases, # min # s on # workers) with GMC's own map (`gmc.map_resolution`, # mm)",
+     lambda: [str(len(shipped.shipped_rows("table1").query("method == 'ours'"))), NOT_KEPT, NOT_KEPT, NOT_KEPT,
+              f"{1000 * make_config('plant').gmc.map_resolution:g}"]),
+    ("real tomato: # / # / # / # % with # / # / # / # m (hemisphere), # / # / # / # % with # / # / # / # m (sphere)",
+     lambda: _gmc_row("hemisphere", "bundled", paper=False)[4:] + _gmc_row("sphere", "bundled", paper=False)[4:]),
+    ("A tie decides on average # / # / # / # of the picks up to # / # / # / # views on the hemisphere and "
+     "# / # / # / # on the sphere", _ties),
+    ("Before (the warm-up's #-voxel map, lowest index on ties) every gain was # after #-# views and GMC reached "
+     "# / # / # / # % (hemisphere) and # / # / # / # % (sphere) on the generated cases.", EARLIER),
+    ("with the authors' # mm voxel", lambda: [_gmc_gain_voxel()]),
+    ("takes # / # s per case on average (hemisphere / sphere, generated pairs; # / # s on the real tomato)",
+     _planning_seconds),
+]
+
+
+# ---------------------------------------------------------------- sources: coverage target prose (docs/results.md)
+def _evaluate_cases() -> list[str]:
+    """The evaluation's protocol as its rows print it: generated cases, seeds, bundled cases, all, per view space."""
+    rows = _md_all_tables("coverage_target_evaluate")[0]
+    cases = {(r["source"], r["view_space"]): r["cases"] for r in rows if r["target"] == "0.98"}
+    one = lambda source: cases[(source, "hemisphere")] if cases[(source, "hemisphere")] == cases[(source, "sphere")] \
+        else "differ"  # noqa: E731
+    return [one("generated"), *_md_seeds("coverage_target_evaluate"), one("bundled"), one("all")]
+
+
+def _below_column(name: str = "coverage_target_evaluate") -> str:
+    """The threshold of the printed column cases_below_97pct."""
+    header = _md_all_tables(name)[0][0]
+    return next(re.fullmatch(r"cases_below_(\d+)pct", c).group(1) for c in header
+                if re.fullmatch(r"cases_below_\d+pct", c))
+
+
+def _asked_99() -> list[str]:
+    rows = [_evaluate_row("coverage_target_evaluate", s, "0.99") for s in ("hemisphere", "sphere")]
+    means = {f"{float(r['coverage_mean']):.1f}" for r in rows}
+    return ["99", means.pop() if len(means) == 1 else f"differ: {means}",
+            f"{100 * _benchmark('coverage_target_calibration').ASKED:g}"]
+
+
+@lru_cache(maxsize=None)
+def _benchmark(name: str):
+    """A module of benchmarks/ (its constants: what it asks, its margins)."""
+    import importlib
+    import sys
+
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    try:
+        return importlib.import_module(name)
+    finally:
+        sys.path.remove(str(ROOT / "benchmarks"))
+
+
+def _calibrate(title_start: str, weights: str, space: str) -> dict:
+    tables = _md_tables("coverage_target_calibrate")
+    title = next(t for t in tables if t.startswith(title_start))
+    return next(r for r in tables[title] if r["weights"] == weights and r["view_space"] == space)
+
+
+def _weightings() -> str:
+    tables = _md_tables("coverage_target_calibrate")
+    rule = next(rows for t, rows in tables.items() if t.startswith("smallest planning target with mean >="))
+    per_space = {s: sum(r["view_space"] == s for r in rule) for s in ("hemisphere", "sphere")}
+    return str(per_space["hemisphere"]) if per_space["hemisphere"] == per_space["sphere"] else f"differ {per_space}"
+
+
+def _chosen_weights() -> list:
+    tables = _md_tables("coverage_target_calibrate")
+    chosen = next(rows for t, rows in tables.items() if t.startswith("chosen rule"))
+    weights = {r["weights"] for r in chosen}
+    assert len(weights) == 1, weights
+    observed, near, far, inflation = re.fullmatch(r"([\d.]+)/([\d.]+)/([\d.]+)/([\d.]+) @1", weights.pop()).groups()
+    by_space = {r["view_space"]: r for r in chosen}
+    return [observed, near if near == far else f"near {near}, far {far}", inflation,
+            *[by_space[s]["miss ratio"] for s in ("hemisphere", "sphere")],
+            *[Printed(by_space[s]["ratio_mean"]) for s in ("hemisphere", "sphere")],
+            *[Printed(by_space[s]["coverage_min"]) for s in ("hemisphere", "sphere")]]
+
+
+def _calibrate_margin() -> str:
+    """The benchmark's margin (mean >= 98 % + margin, in points), as its rule table's title prints it."""
+    title = next(t for t in _md_tables("coverage_target_calibrate") if t.startswith("smallest planning target"))
+    mean = float(re.search(r"mean >= ([\d.]+) %", title).group(1))
+    return f"{mean - 98:.1f}"
+
+
+def _sphere_cap() -> str:
+    title = next(t for t in _md_tables("coverage_target_calibrate") if t.startswith("smallest planning target"))
+    return re.search(r"'sphere': ([\d.]+)", title).group(1)
+
+
+def _weighted_miss() -> list:
+    weighted = [_evaluate_row("coverage_target_evaluate_weighted", s, "0.98") for s in ("hemisphere", "sphere")]
+    plain = [_evaluate_row("coverage_target_evaluate", s, "0.98") for s in ("hemisphere", "sphere")]
+    below = [w["cases_below_97pct"] for w in weighted]
+    return (["98", *[Printed(w["coverage_mean"]) for w in weighted],
+             _below_column("coverage_target_evaluate_weighted") if below == ["1", "1"] else f"cases below: {below}",
+             NOT_KEPT, NOT_KEPT, NOT_KEPT, Printed(weighted[0]["coverage_min"]), NOT_KEPT, NOT_KEPT,
+             Printed(weighted[1]["coverage_min"])]
+            + [Printed(r["ratio_mean"]) for r in plain] + [Printed(r["ratio_mean"]) for r in weighted]
+            + [f"{ISSUE_VIEWS_PER_OPTIMUM:g}"])
+
+
+def _prior_sphere_rule() -> str:
+    rows = _md_all_tables("coverage_target_calibrate_prior")[1]
+    return next(r["miss ratio"] for r in rows if r["view_space"] == "sphere" and r["asked"] == "0.98")
+
+
+_COVERAGE_TARGET = [
+    ("--mode evaluate`, # min on # workers;", lambda: _md_minutes("coverage_target_evaluate")),
+    ("the #-case protocol per view space on generated pairs of seeds #-# plus the bundled real pair's # cases "
+     "(# per view space)", _evaluate_cases),
+    ("cases < # % `cases_below_97pct`", lambda: [_below_column()]),
+]
+_COVERAGE_TARGET_PROSE = [
+    ("A request of # % gets # % on both view spaces (the rule is calibrated for # %).", _asked_99),
+    ("to the ground truth # mm hemisphere, # mm sphere; # / # mm with the prior warm-up)",
+     lambda: [Printed(_evaluate_row("coverage_target_evaluate", s, "0.98")["chamfer_truth_mm"])
+              for s in ("hemisphere", "sphere")] + [NOT_KEPT, NOT_KEPT]),
+    ("A first rule with r = # on the sphere too (calibrated with the geometric warm-up only) missed on the "
+     "evaluation seeds: # views, # % mean, # % min, # cases below # % (the bundled real pair: # % mean);", EARLIER),
+    ("the sphere's r = # is what the calibration seeds give when the rule must hold for both warm-up NBVs",
+     lambda: [_prior_sphere_rule() if float(_prior_sphere_rule()) == float(_calibrated("sphere")) else "differs"]),
+    ("Calibrated on seeds #-# only (`python benchmarks/coverage_target_calibration.py --mode calibrate`, "
+     "`benchmarks/results/coverage_target_calibrate.md`, # min on # workers: # weightings x # planning targets, the "
+     "optimum for # % beside them)",
+     lambda: [*_md_seeds("coverage_target_calibrate"), *_md_minutes("coverage_target_calibrate"), _weightings(),
+              re.search(r"x (\d+) targets", _md_header("coverage_target_calibrate")).group(1),
+              f"{100 * _benchmark('coverage_target_calibration').ASKED:g}"]),
+    ("the chosen weights (observed #, transferred #, inflation #, near within one planning voxel; r # / #) predicted "
+     "# / # views per optimum with the worst case at # / # %", _chosen_weights),
+    ("No weighting beat the unweighted surface at r = # on both view spaces",
+     lambda: [_calibrate("smallest planning target with mean >=", "unweighted", "hemisphere")["miss ratio"]]),
+    ("the far and inflation classes hold under # % of the voxels", NOT_KEPT),
+    ("The calibration was iterated on seeds #-# before the evaluation (a first grid with a #-point margin, then #, "
+     "then the sphere's r held at #,",
+     lambda: [*_md_seeds("coverage_target_calibrate"), EARLIER, _calibrate_margin(), _sphere_cap()]),
+    ("Evaluated once on seeds #-# and the bundled pair", lambda: _md_seeds("coverage_target_evaluate_weighted")),
+    ("it misses two of the issue's three targets at # %: the means hold (# / # %), one case per view space falls "
+     "below # % (hemisphere maize seed #, rotation #, initial view #: # %; sphere bundled pair, rotation #, initial "
+     "view #: # %), and the views per optimum fall only from # / # to # / # (target #)", _weighted_miss),
+    ("(# mm truth voxels inside # mm planning voxels",
+     lambda: [f"{1000 * make_config('plant').gt_resolution:g}",
+              f"{1000 * make_config('plant').selection.cover_resolution:g}"]),
+]
+
+
+# ---------------------------------------------------------------- sources: species prose (docs/results.md)
+def _helios_generation() -> list[str]:
+    """The Helios dataset as benchmarks/results/helios_generation.md prints it: species x plants x sessions, each
+    species' ages (first to last day), the surface sampling."""
+    name = next(t for t in _md_tables("helios_generation") if t.startswith("Per species"))
+    rows = {r["species"]: r for r in _md_tables("helios_generation")[name]}
+    ages = {k: [int(a) for a in r["ages_days"].split()] for k, r in rows.items()}
+    plants_ = {r["plants"] for r in rows.values()}
+    sessions = {int(r["sessions"]) // int(r["plants"]) for r in rows.values()}
+    span = lambda k: [str(min(ages[k])), str(max(ages[k]))]  # noqa: E731
+    same = [k for k in ("strawberry", "soybean", "bean") if ages[k] == ages["strawberry"]]
+    return ([str(len(rows)), plants_.pop() if len(plants_) == 1 else "differ", str(sessions.pop()),
+             *span("tomato"), *(span("strawberry") if len(same) == 3 else ["differ", "differ"]), *span("cowpea"),
+             *span("maize"), *span("rice"), *span("sugarbeet"), re.search(r"([\d.]+) mm spacing", name).group(1)])
+
+
+def _species_protocol() -> list[str]:
+    rows = shipped.shipped_rows("species")
+    return [*[str(int(v[0])) if len(v := rows[c].unique()) == 1 else f"{c} differs"
+              for c in ("rotation_deg", "initial_view")],
+            f"{100 * species_module().SPECIES_TARGET:g}"]
+
+
+def species_module():
+    from tpvp.experiments import species
+
+    return species
+
+
+@lru_cache(maxsize=None)
+def _calibration_csv() -> pd.DataFrame:
+    return pd.read_csv(ROOT / "benchmarks" / "results" / "species_calibration.csv")
+
+
+def _calibration_protocol() -> list:
+    r = _calibration_csv()
+    helios, generated = r[r["source"] == "dataset"], r[r["source"] == "generated"]
+    plant = helios["instance"].str.split("-").str[0]  # Maize01-2025-02-26-2025-03-01: plant Maize01
+    plants_per_species = helios.assign(plant=plant).groupby("species")["plant"].nunique()
+    seeds = generated["instance"].str.extract(r"-generated-(\d+)$")[0].astype(int)
+    targets = sorted(r["target"].dropna().unique(), reverse=False)
+    asked = species_module().SPECIES_TARGET
+    fruit = r[r["kind"] == "organ"]
+    fruit_pairs = fruit.groupby("view_space")["instance"].nunique()
+    return [str(plants_per_species.iloc[0]) if plants_per_species.nunique() == 1 else "differ",
+            *[str(int(v)) for v in helios["initial_view"].unique()],
+            str(seeds.min()), str(seeds.max()), *[str(int(v)) for v in generated["rotation_deg"].unique()],
+            *[str(int(v)) for v in generated["initial_view"].unique()],
+            str(len(r[r["kind"] == "target"]) // len(targets) // r["view_space"].nunique()),
+            *[f"{(1 - t) / (1 - asked):.3g}" for t in targets],
+            str(fruit_pairs.iloc[0]) if fruit_pairs.nunique() == 1 else "differ",
+            str(int(fruit["margin"].min())), str(int(fruit["margin"].max())), NOT_KEPT, NOT_KEPT]
+
+
+def _organ_prose() -> list[str]:
+    organ = _species_tables()["organ_targets"].set_index(["species", "view_space"])
+    evaluation = [s for s in organ.index.get_level_values(0).unique()
+                  if s.removeprefix("helios ") not in species_module().CALIBRATION_SPECIES]
+    reached = {k for k in organ.index if organ.loc[k, "fruit_mean"] >= 0.995}
+    claim_evaluation = {k for k in reached if k[0] in evaluation} == {
+        ("helios cowpea", "hemisphere"), ("helios cowpea", "sphere"), ("helios strawberry", "hemisphere")}
+    claim_calibration = {k for k in reached if k[0] not in evaluation} == {("helios tomato", "hemisphere")}
+    saved = 100 * organ["views_saved"]
+    full = organ["full_cover_fruit"] * 100
+    return [f"{saved.min():.0f}", f"{saved.max():.0f}",
+            "99.5" if claim_evaluation and claim_calibration else f"reached by {sorted(reached)}",
+            _fruit(organ.loc[("helios strawberry", "sphere"), "fruit_mean"]),
+            _fruit(organ.loc[("helios rice", "hemisphere"), "fruit_mean"]),
+            _fruit(organ.loc[("helios rice", "sphere"), "fruit_mean"]),
+            f"{full.min():.1f}", _hundred(f"{full.max():.1f}")]
+
+
+_SPECIES_INTRO = [
+    ("grew # species x # plants x # sessions (tomato #-# days, strawberry, soybean and bean #-#, cowpea #-#, maize "
+     "#-#, rice #-#, sugar beet #-#; the schedule of `benchmarks/helios_generation.py`), # mm surface sampling",
+     _helios_generation),
+    ("ran on them three times, with organ margins of #, # and # planning voxels",
+     lambda: [EARLIER, EARLIER, str(make_config("plant").selection.organ_margin_voxels)]),
+    ("(`python benchmarks/species_evaluation.py --dataset DIR`, # min on # workers;",
+     lambda: [f"{_provenance('species')['refresh_minutes']:.0f}", str(shipped.PROTOCOLS["species"].workers)]),
+    ("plant's last session pair, rotation #, initial view #, paper configuration; \"optimum\" is the fewest views that "
+     "truly see # % of the oracle set", _species_protocol),
+    # the calibration ran from a grown dataset; its result file was summarised again from the rows (--rows): no time
+    ("(`python benchmarks/species_calibration.py --dataset DIR`, # min on # workers;", NOT_KEPT),
+    ("maize grown from another seed (`--seed 1`, # plants each, all three session pairs, initial view #) and our "
+     "generated tomato and maize of seeds #-# (rotation #, initial views # / # / #), # cases per view space; per case "
+     "the plan for every miss ratio r in #, #, #, #, # of the planning target, and on the # pairs whose previous "
+     "session holds fruit `fruit=1.0,leaf=0.95` with an organ margin of #-# planning voxels (# and # in a second run "
+     "on those pairs)", _calibration_protocol),
+]
+_SPECIES_END = [
+    ("with #-# % fewer views than asking all of it, but the *true* fruit coverage reaches # % on the evaluation "
+     "species only on cowpea and the strawberry hemisphere (strawberry sphere # %, rice # % / # %); on the calibration "
+     "species the tomato hemisphere reaches it, the maize ear and the tomato's sphere case do not (the full cover "
+     "sees #-# % of the fruit)", _organ_prose),
+    ("without a margin the fruit came to # (#) / # (#) % on maize, # (#) % on the rice sphere and # % on the tomato "
+     "sphere", EARLIER),
+    ("but the tomato sphere's # against #:",
+     lambda: [EARLIER, _f(_species_tables()["organ_targets"].set_index(["species", "view_space"])
+                          .loc[("helios tomato", "sphere"), "organ_target_views"], 0)]),
+    ("grows from about # to about # points and three quarters of today's ear lies farther than # mm from the "
+     "previous session", NOT_KEPT),
+]
+
+
+# ---------------------------------------------------------------- sources: re-planning prose (docs/results.md)
+def _replan(table: int, space: str, ratio: str | None = None) -> dict:
+    rows = _md_all_tables("replanning_calibrate")[table]
+    return next(r for r in rows if r["view_space"] == space and (ratio is None or r["ratio"] == ratio))
+
+
+def _replan_calibration() -> list:
+    header = _md_header("replanning_calibrate")
+    ratios = [f"{float(v):g}" for v in re.search(r"miss ratios \[([\d., ]+)\]", header).group(1).split(",")]
+    title = next(t for t in _md_tables("replanning_calibrate") if t.startswith("largest miss ratio"))
+    chosen = [_replan(0, s) for s in ("hemisphere", "sphere")]
+    picked = {c["ratio"] for c in chosen}
+    r1 = [_replan(1, s, "1") for s in ("hemisphere", "sphere")]
+    return ([*ratios, *re.findall(r"([\d.]+) %", title)[:2], picked.pop() if len(picked) == 1 else "differ"]
+            + [Printed(chosen[0]["coverage_mean"]), Printed(chosen[0]["coverage_min"]),
+               Printed(chosen[1]["coverage_mean"]), Printed(chosen[1]["coverage_min"])]
+            + [Printed(c["ratio_to_optimum"]) for c in chosen] + ["1"] + [Printed(r["ratio_to_optimum"]) for r in r1]
+            + [Printed(r["coverage_min"]) for r in r1])
+
+
+def _one_shot_on_calibration_seeds() -> list:
+    """The one-shot rule on the calibration seeds: coverage_target_calibrate.md, unweighted, at each view space's r."""
+    summary = next(rows for t, rows in _md_tables("coverage_target_calibrate").items() if t.startswith("summary"))
+    out = []
+    for space in ("hemisphere", "sphere"):
+        r = float(_calibrated(space))
+        target = f"{1 - r * (1 - 0.98):.4g}"
+        row = next(x for x in summary
+                   if x["view_space"] == space and x["weights"] == "unweighted" and x["target"] == target)
+        out += [Printed(row["ratio_mean"]), _calibrated(space)]
+        if space == "sphere":
+            below = round((1 - float(row["reach_97"])) * int(row["cases"]))
+            out += [Printed(row["coverage_min"])] if below == 1 else [f"{below} cases below 97 %"]
+    return out
+
+
+def _replan_evaluation_run() -> list:
+    header = _md_header("replanning_evaluate")
+    cases = int(re.search(r"\((\d+) cases", header).group(1))
+    return [*_md_seeds("replanning_evaluate"), str(cases // 2), *_md_minutes("replanning_evaluate"), NOT_KEPT]
+
+
+ISSUE_REPLAN_VIEWS = 1.10  # issue 27's targets for re-planning at 0.98: views / optimum, path / one-shot path
+ISSUE_REPLAN_PATH = 1.15
+
+
+def _against_targets() -> list:
+    e = {s: _evaluate_row("replanning_evaluate", s, "0.98") for s in ("hemisphere", "sphere")}
+    ratio = [float(e[s]["ratio"]) for s in e]
+    below = [int(e[s]["cases_below_97pct"]) for s in e]
+    path = [float(e[s]["path_ratio"]) for s in e]
+    verdicts = (all(r > ISSUE_REPLAN_VIEWS for r in ratio) and below[0] == 0 and below[1] > 0
+                and all(p <= ISSUE_REPLAN_PATH for p in path))
+    if not verdicts:
+        return ["the verdicts (missed / met) no longer hold"]
+    return ([f"{_benchmark('replanning').ASKED:g}"] + [Printed(e[s]["ratio"]) for s in e]
+            + [f"{ISSUE_REPLAN_VIEWS:.2f}"]
+            + [Printed(e[s]["one_shot_ratio"]) for s in e] + [_below_column("replanning_evaluate")]
+            + [str(below[1]), e["sphere"]["cases"], Printed(e["sphere"]["coverage_min"]),
+               Printed(_replan(0, "sphere")["coverage_min"]), f"{ISSUE_REPLAN_PATH:.2f}"]
+            + [Printed(e[s]["path_ratio"]) for s in e])
+
+
+_REPLANNING = [
+    ("seeds #-# only, # cases per view space, re-planning after every view, # min on # workers;",
+     lambda: [*_md_seeds("replanning_calibrate"), _replan(0, "hemisphere")["cases"],
+              *_md_minutes("replanning_calibrate")]),
+    ("the miss ratio r of the planning target in #, #, #, #; the largest whose mean true coverage reaches # % with no "
+     "case below # % is # on both view spaces (# % / # % min hemisphere, # % / # % sphere; #x / #x the optimum; r = # "
+     "gave #x / #x but # % / # % minima)", _replan_calibration),
+    ("rule took #x (hemisphere, r = #) and #x (sphere, r = #, one case at # %)", _one_shot_on_calibration_seeds),
+    ("seeds #-# and the bundled pair, # cases per view space, # min on # workers beside another #-worker job;",
+     _replan_evaluation_run),
+]
+_REPLANNING_END = [
+    ("Against the issue's targets at #: views / optimum # (hemisphere) and # (sphere), target #: **missed** (from "
+     "# / # one-shot); no case below # %: met on the hemisphere, **missed** on the sphere (# of # cases, lowest # %: "
+     "the sphere's rule did not carry over from the calibration seeds, where its lowest case was # %); path at most "
+     "#x the one-shot plan's: met (# / #)",
+     _against_targets),
+    ("measured beside another #-worker job (about half speed)", NOT_KEPT),
+    ("(about #-# s alone)", NOT_KEPT),
+    ("(on two calibration plants, re-planning every # views: #-# unexpected and #-# contradicted planning voxels per "
+     "re-plan, of #-# that a view is predicted to see)", NOT_KEPT),
+    ("(# / # added and # / # dropped per case, hemisphere / sphere, at r = # on the calibration seeds)",
+     lambda: [*[f"{float(_replan(0, s)['views_added']):.1f}" for s in ("hemisphere", "sphere")],
+              *[f"{float(_replan(0, s)['views_dropped']):.1f}" for s in ("hemisphere", "sphere")],
+              _replan(0, "hemisphere")["ratio"]]),
+    ("stays # in the `paper` configuration", lambda: [str(make_config("plant").selection.replan_after)]),
+]
+
+
+# ---------------------------------------------------------------- sources: greenhouse rows (docs/results.md)
+@lru_cache(maxsize=None)
+def _row_tables() -> dict:
+    return rows.tables(shipped.shipped_rows("tables5_6"))
+
+
+REFERENCE_COLUMNS = ("complete", "candidates", "handheld")  # the table's columns, left to right
+
+
+def _t6(reference: str, method: str, budget=None, resolution=None) -> pd.Series:
+    t = _row_tables()["table6_coverage_effort"]
+    t = t[(t["reference"] == reference) & (t["method"] == method)]
+    if budget is not None:
+        t = t[t["budget"] == budget]
+    if resolution is not None:
+        t = t[t["cover_resolution_cm"] == resolution]
+    assert len(t) == 1, (reference, method, budget, resolution)
+    return t.iloc[0]
+
+
+def _cell(row: pd.Series, method: str, paper: bool = False) -> list[str]:
+    views, coverage, path = ((row["paper_views"], row["paper_coverage"], row["paper_path_length_m"]) if paper else
+                             (row["views_mean"], row["coverage_mean"], row["path_length_m_mean"]))
+    return [_f(views, 1) if method == "ours" else _f(views, 0), _f(coverage),
+            _f(path, 2 if method == "coarse" else 1)]
+
+
+_TABLE6_ROWS = {"passive sweep": ("coarse", None, None), **{
+    f"Block-wise NBV {b}, one run": ("blockwise-nbv", b, None) for b in (100, 300, 500)}, **{
+    f"{label} random {b}": (method, b, None) for label, method in (
+        ("PriorOBB", "prior-obb-random"), ("PriorPassive", "prior-passive-random"),
+        ("PriorTransfer", "prior-transfer-random")) for b in (100, 300, 500)}, **{
+    f"Ours {r} cm": ("ours", None, r) for r in (10, 5, 4, 3)}}
+
+
+def _table6_sources() -> list:
+    out = []
+    for label, (method, budget, resolution) in _TABLE6_ROWS.items():
+        def compute(method=method, budget=budget, resolution=resolution):
+            cells = [_t6(ref, method, budget, resolution) for ref in REFERENCE_COLUMNS]
+            return [v for c in cells for v in _cell(c, method)] + _cell(cells[0], method, paper=True)
+        out.append((f"| {label} | # / # / # | # / # / # | # / # / # | # / # / # |", compute))
+    return out
+
+
+def _prefix(reference: str, views: int) -> float:
+    t = _row_tables()["blockwise_prefix_curve"]
+    t = t[(t["reference"] == reference) & (t["views"] == views)]
+    assert len(t) == 1
+    return float(t["coverage_mean"].iloc[0])
+
+
+def _table5(reference: str) -> pd.Series:
+    t = _row_tables()["table5_upper_limit"]
+    return t[t["reference"] == reference].set_index("prior")
+
+
+PRIORS = ("obb", "passive", "transfer")
+
+
+def _table5_row() -> list[str]:
+    views = {float(_table5(r)["views_mean"].max()) for r in REFERENCE_COLUMNS}
+    return ([f"{views.pop():.0f}" if len(views) == 1 else "differ"]
+            + [_f(_table5(r).loc[p, "coverage_mean"]) for r in REFERENCE_COLUMNS for p in PRIORS]
+            + [_f(_table5("handheld").loc[p, "paper_coverage_mean"]) for p in PRIORS])
+
+
+def _row_cases() -> list[str]:
+    r = shipped.shipped_rows("tables5_6")
+    per_reference = r.groupby("reference")["case"].nunique()
+    seeds = r["case"].str.extract(r"seed (\d+)")[0].unique()
+    first, last = int(r["previous_session"].min()), int(r["previous_session"].max())
+    return [str(per_reference.iloc[0]) if per_reference.nunique() == 1 else "differ",
+            seeds[0] if len(seeds) == 1 else "differ", str(first), str(first + 1), str(last), str(last + 1)]
+
+
+def _row_run() -> list:
+    config = make_config("row")
+    r = shipped.shipped_rows("tables5_6")
+    cases = str(r.groupby(["reference", "case"]).ngroups)
+    return [f"{100 * config.gt_resolution:g}", f"{config.sensor.max_range:g}", NOT_KEPT, NOT_KEPT, cases, cases]
+
+
+def _warm_start() -> list[str]:
+    coarse = _t6("handheld", "coarse")
+    r = shipped.shipped_rows("tables5_6")
+    random = r[r["method"].str.endswith("random")]
+    repetitions = random.groupby(["reference", "case", "method", "budget"])["repetition"].nunique()
+    return [f"{coarse['views_mean']:.0f}", _f(coarse["path_length_m_mean"]),
+            str(repetitions.iloc[0]) if repetitions.nunique() == 1 else "differ"]
+
+
+def _what_the_reference_moves() -> list:
+    t = _row_tables()["table6_coverage_effort"]
+    keys = ["method", "budget", "cover_resolution_cm"]
+    spread = t.groupby(keys, dropna=False)["coverage_mean"].agg(lambda c: c.max() - c.min()).max()
+    ours = t[t["method"] == "ours"].groupby("cover_resolution_cm")
+    views = ours["views_mean"].agg(lambda v: v.max() / v.min() - 1).max()
+    path = ours["path_length_m_mean"].agg(lambda v: v.max() / v.min() - 1).max()
+    return [f"{spread:.0f}", f"{100 * views:.1f}", f"{100 * path:.0f}"]
+
+
+def _sweep_and_candidates() -> list:
+    coarse = _t6("handheld", "coarse")
+    upper = _table5("handheld")
+    return [_f(coarse["coverage_mean"], 1), _f(coarse["paper_coverage"], 1), _table5_row()[0],
+            _f(upper["coverage_mean"].min(), 1), _f(upper["coverage_mean"].max(), 1),
+            _f(upper["paper_coverage_mean"].min(), 1), _f(upper["paper_coverage_mean"].max(), 1)]
+
+
+def _ours_against_random() -> list:
+    ours = {r: _t6(r, "ours", resolution=5) for r in REFERENCE_COLUMNS}
+    baselines = ("prior-obb-random", "prior-passive-random", "prior-transfer-random")
+    best_random = {r: max(_t6(r, m, 300)["coverage_mean"] for m in baselines) for r in REFERENCE_COLUMNS}
+    if not all(ours[r]["coverage_mean"] > best_random[r] for r in REFERENCE_COLUMNS):
+        return ["Ours no longer sees more than every random baseline"]
+    transfer = {r: _t6(r, "prior-transfer-random", 300) for r in REFERENCE_COLUMNS}
+    return ["5", _f(ours["handheld"]["coverage_mean"]), f"{ours['handheld']['views_mean']:.0f}",
+            _f(transfer["handheld"]["coverage_mean"]), f"{transfer['handheld']['views_mean']:.0f}",
+            _f(ours["candidates"]["coverage_mean"]), _f(transfer["candidates"]["coverage_mean"])]
+
+
+def _monotone_claim() -> list[str]:
+    rises = all(all(a < b for a, b in zip(c, c[1:])) for c in (
+        [_t6(r, "ours", resolution=cm)["coverage_mean"] for cm in (10, 5, 4, 3)] for r in REFERENCE_COLUMNS))
+    return _claim(rises, "Ours' coverage rises as the covering voxel shrinks, with every reference")
+
+
+def _paper_between_claim() -> list[str]:
+    sweep = [_t6(r, "coarse")["coverage_mean"] for r in ("complete", "candidates")]
+    paper_sweep = _t6("handheld", "coarse")["paper_coverage"]
+    upper = [(_table5("complete").loc[p, "coverage_mean"], _table5("handheld").loc[p, "coverage_mean"],
+              _table5("handheld").loc[p, "paper_coverage_mean"]) for p in PRIORS]
+    return _claim(sweep[0] < paper_sweep < sweep[1] and all(lo < paper < hi for lo, hi, paper in upper),
+                  "the paper's sweep share between complete and candidates, its Table V between complete and handheld")
+
+
+def _blockwise_path() -> list:
+    nbv = _t6("handheld", "blockwise-nbv", 300)
+    ours5 = _t6("handheld", "ours", resolution=5)
+    ours4 = _t6("candidates", "ours", resolution=4)
+    low, high = _t6("candidates", "blockwise-nbv", 100), _t6("candidates", "blockwise-nbv", 300)
+    share = (ours4["coverage_mean"] - low["coverage_mean"]) / (high["coverage_mean"] - low["coverage_mean"])
+    interpolated = low["path_length_m_mean"] + share * (high["path_length_m_mean"] - low["path_length_m_mean"])
+    ratios = sorted([nbv["path_length_m_mean"] / ours5["path_length_m_mean"],
+                     interpolated / ours4["path_length_m_mean"]])
+    return [f"{ratios[0]:.0f}", f"{ratios[1]:.0f}", _f(nbv["coverage_mean"]), f"{nbv['views_mean']:.0f}",
+            _f(nbv["path_length_m_mean"], 1), _f(ours5["coverage_mean"]), "5", _f(ours5["path_length_m_mean"], 1),
+            f"{interpolated:.0f}", _f(ours4["coverage_mean"]), "4", _f(ours4["path_length_m_mean"], 1)]
+
+
+def _paper_blockwise() -> list:
+    paper = [_t6("handheld", "blockwise-nbv", b)["paper_coverage"] for b in (100, 300, 500)]
+    below = all(_t6(r, "blockwise-nbv", b)["coverage_mean"] > p for r in REFERENCE_COLUMNS
+                for b, p in zip((100, 300, 500), paper))
+    at100 = [_prefix(r, 100) for r in REFERENCE_COLUMNS]
+    at300 = [_prefix(r, 300) for r in ("complete", "candidates")]
+    if not (below and all(v < paper[0] for v in at100) and at300[0] < paper[1] < at300[1]):
+        return ["the comparison with the paper's Block-wise NBV no longer holds"]
+    return ([_f(p, 1) for p in paper] + ["100"] + [_f(v, 1) for v in at100] + ["300"] + [_f(v, 1) for v in at300])
+
+
+def _blocks() -> str:
+    config = make_config("row").blockwise
+    return str(config.blocks_along * config.bands)
+
+
+def _views_against_paper() -> list:
+    out = []
+    for resolution in (10, 5, 3):
+        views = [_t6(r, "ours", resolution=resolution)["views_mean"] for r in REFERENCE_COLUMNS]
+        paper = _t6("handheld", "ours", resolution=resolution)["paper_views"]
+        out.append((resolution, f"{min(views):.0f}", f"{max(views):.0f}",
+                    f"{paper:.1f}" if paper % 1 else f"{paper:.0f}"))
+    return [str(out[0][0]), str(out[1][0]), out[0][1], out[0][2], out[0][3], out[1][1], out[1][2], out[1][3],
+            str(out[2][0]), out[2][1], out[2][2], out[2][3]]
+
+
+_ROWS = [
+    ("on the # generated cases (room1 and room4, seed #, pairs #-># ... #->#) once per reference", _row_cases),
+    ("`paper-row` configuration (# cm ground truth, # m range), # workers: # min for the # cases from empty caches "
+     "(# oracles included)", _row_run),
+    ("include its # views and # m; random baselines averaged over # repetitions per case first", _warm_start),
+    *_table6_sources(),
+    ("| Block-wise NBV, prefix # / # of the #-view run | # / # % | # / # % | # / # % | |",
+     lambda: ["100", "300", "500"] + [_f(_prefix(r, v)) for r in REFERENCE_COLUMNS for v in (100, 300)]),
+    ("| Table V: all # candidates, PriorOBB / PriorPassive / PriorTransfer | # / # / # % | # / # / # % | # / # / # % "
+     "| # / # / # % |", _table5_row),
+    ("every coverage, by up to # points, and hardly any view count or path (each reference filters both sessions the "
+     "same way; Ours' views change by at most # % between references, its paths by at most # %)",
+     _what_the_reference_moves),
+    ("(about # m from the row's mid-plane, along the aisle)", CODE_FACT),
+    ("the passive sweep alone sees # % of its oracle (paper # %), all # candidates of any prior #-# % (paper #-# %)",
+     _sweep_and_candidates),
+    ("(handheld, # cm: # % with # views against # % with #; candidates: # against # %)", _ours_against_random),
+    ("coverage rises monotonically as the covering voxel shrinks", _monotone_claim),
+    ("its sweep share sits between our `complete` and `candidates` references, its Table V between `complete` and "
+     "`handheld`", _paper_between_claim),
+    ("Block-wise NBV needs #-#x Ours' path for the same coverage (handheld: # % after # views on # m, Ours # % at # cm "
+     "on # m; candidates: about # m interpolated for Ours' # % at # cm on # m)", _blockwise_path),
+    ("read as prefixes of its #-view run", lambda: [str(max(make_config("row").protocol.nbv_budgets))]),
+    ("its first # views visit only # of the # blocks", lambda: ["100", NOT_KEPT, _blocks()]),
+    ("The paper's Block-wise NBV (# / # / # %) lies below our runs per budget with every reference; against our "
+     "prefixes it lies above all three references at # views (# / # / # %) and between the `complete` and "
+     "`candidates` prefixes at # views (# / # %)", _paper_blockwise),
+    ("our three-state # cm map", lambda: [f"{100 * make_config('row').blockwise.map_resolution:g}"]),
+    ("it selects more views at # and # cm (#-# against # and #-# against #) and fewer at # cm (#-# against #)",
+     _views_against_paper),
+    ("reached # / # / # % of the `candidates` rows", NOT_KEPT),
+]
+
+
+# ---------------------------------------------------------------- sources: why Ours selects more views
+def _view_count(surface: str = "planning surface", candidates: str = "ours", reference: str = "handheld") -> dict:
+    rows_ = _md_all_tables("row_view_count")[0]
+    return {r["cover_cm"]: r for r in rows_ if r["reference"] == reference and r["surface"] == surface
+            and r["candidates"] == candidates}
+
+
+def _paper_planned(resolution: int) -> float:
+    passive = _t6("handheld", "coarse")["views_mean"]
+    return float(_t6("handheld", "ours", resolution=resolution)["paper_views"] - passive)
+
+
+def _scaled(text: str, factor: float = 100) -> Printed:
+    return Printed(f"{factor * float(text):.6g}")
+
+
+def _planned(resolution: int) -> Printed:
+    """Ours' planned views on the handheld reference (the printout's ``selected``): views less the passive sweep's,
+    from the shipped rows (the printout's 4 digits cannot round 394.25 as the page does)."""
+    planned = _t6("handheld", "ours", resolution=resolution)["views_mean"] - _t6("handheld", "coarse")["views_mean"]
+    selected = float(_view_count()[str(resolution)]["selected"])
+    same = Printed(f"{selected:g}").matches(f"{planned:.2f}")
+    return _f(planned, 1) if same else f"rows {planned}, printout {selected}"
+
+
+def _view_count_row(cm: str) -> list:
+    r = _view_count()[cm]
+    n = int(re.search(r"\((\d+) cases", _md_header("row_view_count")).group(1)) // 2  # per reference
+    counts = lambda value: Printed(value, cases=n)  # noqa: E731  (means of whole numbers over the cases)
+    return [counts(r[c]) for c in ("planning_voxels", "left_to_cover", "voxels_one_candidate")] + [
+        _scaled(r["one_candidate_behind_front"]), counts(r["forced_views"]), Printed(r["voxels_per_candidate"]),
+        _planned(int(cm)), counts(r["selected_front_1_layers"]), counts(r["selected_front_2_layers"]),
+        counts(_view_count(candidates="authors' PriorTemporal")[cm]["selected"]),
+        counts(_view_count("aligned previous only")[cm]["selected"]), _f(_paper_planned(int(cm)), 1)]
+
+
+def _same_picture() -> list[str]:
+    columns = ("planning_voxels", "left_to_cover", "voxels_one_candidate", "one_candidate_behind_front",
+               "forced_views", "voxels_per_candidate", "selected", "selected_front_1_layers", "selected_front_2_layers")
+
+    def most(surface, candidates, cols):
+        a, b = _view_count(surface, candidates), _view_count(surface, candidates, "candidates")
+        return max(abs(float(b[cm][c]) / float(a[cm][c]) - 1) for cm in a for c in cols)
+    planning = max(most("planning surface", c, columns) for c in ("ours", "authors' PriorTemporal"))
+    selected = max(most("planning surface", c, ("selected",)) for c in ("ours", "authors' PriorTemporal"))
+    previous = most("aligned previous only", "ours", columns)
+    return [f"{100 * selected:.0f}", f"{100 * planning:.0f}", f"{100 * previous:.0f}"]
+
+
+def _view_count_layers() -> list[str]:
+    """The numbers in the column names: voxels seen by one candidate, the front layers of the second restriction."""
+    header = list(_md_all_tables("row_view_count")[0][0])
+    one = re.search(r"voxels_(one)_candidate", " ".join(header))
+    layers = [re.fullmatch(r"selected_front_(\d+)_layers", c).group(1) for c in header
+              if re.fullmatch(r"selected_front_\d+_layers", c)]
+    return ["1" if one else "no column", layers[-1]]
+
+
+def _authors_fewer(cm: str) -> str:
+    authors = float(_view_count(candidates="authors' PriorTemporal")[cm]["selected"])
+    return f"{100 * (1 - authors / float(_view_count()[cm]['selected'])):.0f}"
+
+
+def _flatter() -> list:
+    selected = {ref: _view_count(reference=ref) for ref in ("handheld", "candidates")}
+    at3 = sorted(float(selected[ref]["3"]["selected"]) for ref in selected)
+    return [EARLIER, "10", f"{float(selected['handheld']['10']['selected']):.0f}", "10", f"{at3[0]:.0f}",
+            f"{at3[1]:.0f}",
+            "3", f"{_paper_planned(10):.0f}", f"{_paper_planned(3):.0f}"]
+
+
+def _deep_voxels() -> list:
+    v = _view_count()
+    behind = [100 * float(v[cm]["one_candidate_behind_front"]) for cm in v]
+    front = [float(v["10"][c]) for c in ("selected_front_1_layers", "selected_front_2_layers")]
+    paper = _paper_planned(10)
+    if not front[0] < paper < front[1]:
+        return ["the paper's count no longer lies between the front layers'"]
+    return [f"{min(behind):.0f}", f"{max(behind):.0f}", Printed(v["10"]["forced_views"]), Printed(v["10"]["selected"]),
+            "10", f"{front[0]:.0f}", "10", f"{front[1]:.0f}", f"{paper:.0f}", f"{paper:.0f}",
+            f"{_paper_planned(3):.0f}", "10", "3", f"{float(v['10']['selected']):.0f}",
+            f"{float(v['3']['selected']):.0f}"]
+
+
+def _target_missed() -> list:
+    out = [Printed(_view_count()["10"]["selected"]), Printed(_view_count()["10"]["views (passive included)"]), "10"]
+    for i, cm in enumerate((10, 5, 4, 3)):
+        ours = _t6("handheld", "ours", resolution=cm)
+        paper = ours["paper_views"]
+        ratio = ours["views_mean"] / paper
+        if i == 0:
+            out += [_f(paper, 1), _f(ratio, 1)]
+        else:
+            out += [f"{ours['views_mean']:.0f}", f"{paper:.0f}", str(cm), _f(ratio)]
+    return out
+
+
+_WHY_10_CM = [
+    ("Why Ours selects more views at # cm", lambda: [f"{100 * max(make_config('row').protocol.cover_resolutions):g}"]),
+    ("| seen by # candidate (behind the front) | views forced by them | views per candidate (voxels) | selected | "
+     "front layer only | front # layers |", lambda: _view_count_layers()),
+    ("\"front layer only\" and \"front # layers\" solve the same cover", lambda: _view_count_layers()[1:]),
+    ("deep voxels visible through gaps at # cm and many hard ones at # cm", lambda: ["10", "3"]),
+    ("Ours selects #x the paper's views at a # cm covering voxel (and why its curve is flatter: # planned views at "
+     "# cm, #-# at # cm, against the paper's # and #)", _flatter),
+    ("(# cases, # min; `benchmarks/results/row_view_count.md`) measures the set-cover instance; means over the # cases "
+     "of the handheld reference",
+     lambda: [re.search(r"\((\d+) cases", _md_header("row_view_count")).group(1), NOT_KEPT,
+              str(int(re.search(r"\((\d+) cases", _md_header("row_view_count")).group(1)) // 2)]),
+    ("(\"selected\" and the paper are planned views, without the # passive ones;",
+     lambda: [f"{_t6('handheld', 'coarse')['views_mean']:.0f}"]),
+    ("its selected views differ by at most # %, its other columns by at most # %, and those of the aligned previous "
+     "session alone by at most # %.)", _same_picture),
+    ("the registered previous session + the # cm inflation + the passive cloud", CODE_FACT),
+    ("the # PriorTemporal candidates (# targets x # rounds; # views = # passive + # positions, # of them without a "
+     "look-at and excluded)", CODE_FACT),
+    ("(Gurobi, # s)", CODE_FACT),
+    ("instead of our targets, # % fewer views at # cm.",
+     lambda: [_authors_fewer("10"), "10"]),
+    ("truncated pixel # m deep", CODE_FACT),
+    ("it changes the # cm count by +# and +# views, the # cm count by -# and -#, the # cm count by +# and +# (room1 "
+     "pair #, room4 pair #)", NOT_KEPT),
+    ("#-# % of the voxels that a single candidate sees lie one or more covering voxels behind the row's front surface: "
+     "a candidate sees them through a gap in the generated canopy, and each forces its view (# of the # at # cm). "
+     "Covering the front layer alone takes # views at # cm, two layers #; the paper's # lies between. The paper's "
+     "curve rises much faster (# -> # from # to # cm, ours # -> #)", _deep_voxels),
+    ("Target missed: # planned views (# with the sweep) at # cm against the paper's # (#x), # against # at # cm "
+     "(#x), # against # at # cm (#x), # against # at # cm (#x)", _target_missed),
+    ("(a #-degree roll: # degrees wide, # high;", CODE_FACT),
+    ("On room1 pair # and room4 pair # (handheld) portrait lowers the sweep's coverage by # and # points and changes "
+     "Ours' views by # to #.", NOT_KEPT),
+]
+_WHY_10_CM += [
+    (f"| {cm} cm | # | # | # (# %) | # | # | # | # | # | # | # | # |", lambda cm=cm: _view_count_row(cm))
+    for cm in ("10", "5", "3")]
+
+
+# ---------------------------------------------------------------- sources: Table VII (docs/results.md)
+@lru_cache(maxsize=None)
+def _table7() -> pd.DataFrame:
+    return rows.tables(shipped.shipped_rows("table7"))["table7_pose_noise"]
+
+
+def _table7_row(sigma_t: float, sigma_r: float, icp) -> list:
+    t = _table7()
+    ours = t[(t["sigma_t_m"] == sigma_t) & (t["sigma_r_deg"] == sigma_r) & (t["icp"] == bool(icp))].iloc[0]
+    p = rows.paper_pose_noise()
+    paper = p[(p["sigma_t_m"] == sigma_t) & (p["sigma_r_deg"] == sigma_r)
+              & (p["icp"] == ("-" if icp is None else "ON" if icp else "OFF"))].iloc[0]
+    return [_f(ours["chamfer_mm_mean"]), _f(ours["chamfer_mm_std"]), EARLIER, EARLIER,
+            *[v for c in ("precision", "recall", "f1") for v in (_f(100 * ours[f"{c}_10mm_mean"], 1), EARLIER)],
+            _f(paper["chamfer_mm_mean"]), _f(paper["precision_1cm_mean"], 1), _f(paper["f1_1cm_mean"], 1)]
+
+
+_TABLE7_LEVELS = {"0, 0": (0.0, 0.0, None), "0.002, 0.5 | off": (0.002, 0.5, False),
+                  "0.005, 1 | off": (0.005, 1.0, False),
+                  "0.01, 2 | off": (0.01, 2.0, False), "0.002, 0.5 | on": (0.002, 0.5, True),
+                  "0.005, 1 | on": (0.005, 1.0, True), "0.01, 2 | on": (0.01, 2.0, True)}
+
+
+def _table7_run() -> list:
+    r = shipped.shipped_rows("table7")
+    noisy = r[r["sigma_t_m"] > 0]
+    draws = noisy.groupby(["case", "sigma_t_m", "icp"])["draw"].nunique()
+    return [_f(r["views"].mean(), 1), str(r["case"].nunique()),
+            str(draws.iloc[0]) if draws.nunique() == 1 else "differ",
+            NOT_KEPT, NOT_KEPT, EARLIER, EARLIER, EARLIER, "1"]
+
+
+def _icp_drift() -> list:
+    r = shipped.shipped_rows("table7")
+    noisy = r[r["sigma_t_m"] > 0]
+    accepted = noisy[noisy["icp"]].groupby("sigma_t_m")["icp_accepted"].mean()
+    drift = noisy.groupby(["icp", "sigma_t_m"])["drift_mm"].mean()
+    accepted_ = {f"{v:.0f}" for v in accepted}
+    return [accepted_.pop() if len(accepted_) == 1 else "differ", _f(r["views"].mean(), 1),
+            _f(drift[True].min()), _f(drift[True].max()), f"{drift[False].min():.0f}", f"{drift[False].max():.0f}",
+            EARLIER, EARLIER, EARLIER, EARLIER]
+
+
+def _milder() -> list:
+    t = _table7()
+    largest = t[(t["sigma_t_m"] == t["sigma_t_m"].max()) & ~t["icp"]].iloc[0]
+    free = t[t["sigma_t_m"] == 0].iloc[0]
+    p = rows.paper_pose_noise()
+    return ["1", _f(100 * largest["precision_10mm_mean"], 1), _f(p["precision_1cm_mean"].min(), 1),
+            _f(100 * free["recall_10mm_mean"], 1), _f(p[p["sigma_t_m"] == 0]["recall_1cm_mean"].iloc[0], 1)]
+
+
+_TABLE7 = [
+    ("Ours at # cm on the handheld reference", lambda: [f"{make_config('row').pose_noise.cover_resolution * 100:g}"]),
+    ("# views per case, # cases x # draws per level, # min on # workers with the rows' oracles cached while other jobs "
+     "shared the cores; in brackets the earlier run on the candidates reference, `--reference candidates`, # views per "
+     "case, # min # s; Chamfer in mm, precision / recall / F1 in % at tau = # cm", _table7_run),
+    *[(f"| {key.split(' | ')[0]} | {'-' if icp is None else 'on' if icp else 'off'} | # ± # [# ± #] | # [#] | "
+       "# [#] | "
+       "# [#] | # / # / # |", lambda st=st, sr=sr, icp=icp: _table7_row(st, sr, icp))
+      for key, (st, sr, icp) in _TABLE7_LEVELS.items()],
+    ("Before the registration fix (candidates reference, # views per case): the same to within # mm and # points "
+     "(largest level with ICP # ± # mm, F1 # %)", EARLIER),
+    ("ICP accepts # of # views, residual drift #-# mm against #-# mm without it; on the earlier candidates run # of "
+     "# views, #-# mm)", _icp_drift),
+    ("(precision at # cm # % against # % at the largest level) and our noise-free recall higher (# against # %)",
+     _milder),
+    ("voxel centres of a # cm simulator", lambda: [f"{100 * make_config('row').gt_resolution:g}"]),
+]
+
+
+# ---------------------------------------------------------------- sources: learned baselines (docs/results.md)
+def _dataclass_default(path: str, name: str, field: str):
+    """A dataclass field's default as the source writes it (read, not imported: tpvp.learning.training imports
+    torch)."""
+    import ast
+
+    tree = ast.parse((ROOT / path).read_text())
+    cls = next(n for n in ast.walk(tree) if isinstance(n, ast.ClassDef) and n.name == name)
+    return next(ast.literal_eval(n.value) for n in cls.body
+                if isinstance(n, ast.AnnAssign) and isinstance(n.target, ast.Name) and n.target.id == field)
+
+
+def _learning_metrics(kind: str) -> pd.Series:
+    m = pd.read_csv(ROOT / "tpvp" / "data" / "learning" / "metrics.csv")
+    return m[(m["kind"] == kind) & (m["weights"] == "shipped")].iloc[0]
+
+
+def _history(kind: str) -> pd.DataFrame:
+    return pd.read_csv(ROOT / "tpvp" / "data" / "learning" / f"{kind}_history.csv")
+
+
+def _training(kind: str) -> list[str]:
+    m, h = _learning_metrics(kind), _history(kind)
+    per_round = h["states_seen"].diff().dropna().unique()
+    return [_f(m["seconds"] / 60, 1), f"{m['rounds']:.0f}", str(int(per_round[0])) if len(per_round) == 1 else "differ",
+            _f(m["epochs"]), str(int(h.loc[h["validation_loss"].idxmin(), "round"]))]
+
+
+def _dataset() -> list:
+    from tpvp.learning.dataset import DatasetConfig
+
+    d = DatasetConfig()
+    per_species = {f"{d.train_plants // len(d.species)}"}
+    return [str(d.train_plants), *[per_species.copy().pop() for _ in d.species], str(d.rotations),
+            str(d.validation_plants),
+            str(d.test_plants), str(d.held_out_rotations), NOT_KEPT, str(d.n1), NOT_KEPT, NOT_KEPT, NOT_KEPT]
+
+
+def _weights_files() -> list[str]:
+    folder = ROOT / "tpvp" / "data" / "learning"
+    return [_f((folder / "ma-scvp.pt").stat().st_size / 1e6, 1), f"{_learning_metrics('ma-scvp')['parameters']:.0f}",
+            _f((folder / "pc-nbv.pt").stat().st_size / 1e6, 2), f"{_learning_metrics('pc-nbv')['parameters']:.0f}"]
+
+
+def _held_out() -> list:
+    from tpvp.learning.dataset import DatasetConfig
+
+    d = DatasetConfig()
+    seeds = d.seeds("test")
+    ma, pc = _learning_metrics("ma-scvp"), _learning_metrics("pc-nbv")
+    return [str(seeds.start), str(seeds.stop - 1), NOT_KEPT, NOT_KEPT, NOT_KEPT, _f(ma["test_recall"], 3),
+            _f(ma["test_precision"], 3), CODE_FACT, NOT_KEPT, NOT_KEPT, NOT_KEPT, NOT_KEPT, _f(pc["test_spearman"]),
+            NOT_KEPT, NOT_KEPT, _f(pc["test_chosen_rank"], 1), _f(100 * pc["test_chosen_best"], 0)]
+
+
+def _learned_row(space: str, method: str, paper: str | None) -> list:
+    out = _mean_std(_t1("generated", space, method, name="table1_learned"))
+    if paper:
+        p = _paper_plant("I", space, paper)
+        out += [_f(p["views_mean"]), _f(p["coverage_mean"]), _f(p["path_mean"])]
+    return out
+
+
+def _over_prediction() -> list[str]:
+    t = {(s, m): _t1("generated", s, m, name="table1_learned") for s in ("hemisphere", "sphere")
+         for m in ("ma-scvp", "ma-scvp-oracle")}
+    views = [t[(s, "ma-scvp")]["views_mean"] - t[(s, "ma-scvp-oracle")]["views_mean"] for s in ("hemisphere", "sphere")]
+    coverage = [t[(s, "ma-scvp-oracle")]["coverage_mean"] - t[(s, "ma-scvp")]["coverage_mean"]
+                for s in ("hemisphere", "sphere")]
+    oracle = [t[(s, "ma-scvp-oracle")]["views_mean"] for s in ("hemisphere", "sphere")]
+    paper = _paper_plant("I", "hemisphere", "ma-scvp")
+    sphere = min(t[("sphere", m)]["coverage_mean"] for m in ("ma-scvp", "ma-scvp-oracle"))
+    weight = _dataclass_default("tpvp/learning/training.py", "TrainConfig", "positive_weight")
+    return ["1", f"{weight:g}", _f(min(views), 1), _f(max(views), 1), _f(min(coverage)),
+            _f(max(coverage)), _f(min(oracle), 0), _f(max(oracle), 0), f"{1000 * make_config('plant').gt_resolution:g}",
+            _f(paper["views_mean"], 1), _f(paper["coverage_mean"], 1), _f(sphere, 1)]
+
+
+def _real_ma_scvp() -> list[str]:
+    rows_ = [_t1("bundled", s, "ma-scvp", name="table1_learned") for s in ("hemisphere", "sphere")]
+    return [str(int(rows_[0]["cases"])), _f(rows_[0]["views_mean"]), _f(rows_[0]["coverage_mean"]),
+            _f(rows_[1]["views_mean"]), _f(rows_[1]["coverage_mean"])]
+
+
+def _views_of(space: str) -> int:
+    from tpvp.viewspace.space import get_view_space
+
+    return len(get_view_space(space).positions)
+
+
+_LEARNED = [
+    ("generated # training plants (# tomato, # maize) at # rotations, # validation and # test plants at #, and drew "
+     "# states by MA-SCVP's long-tail rule (n1 = #): # train / # validation / # test", _dataset),
+    ("Measured on this #-core machine: dataset # min (while other jobs shared the cores)", NOT_KEPT),
+    ("MA-SCVP # min (# rounds of # states = # epochs, best round #,", lambda: _training("ma-scvp")),
+    ("PC-NBV # min (# rounds of # = # epochs, best round #): # min in all (budget #)",
+     lambda: _training("pc-nbv") + [NOT_KEPT, CODE_FACT]),
+    ("(# MB, # parameters) and `pc-nbv.pt` (# MB, # parameters)", _weights_files),
+    ("repeated the first one's # rounds to every printed digit", NOT_KEPT),
+    ("Inference on # cores (`python benchmarks/learned_inference_bench.py`): MA-SCVP # ms per call (max #, grid ray "
+     "insertion included), PC-NBV # ms (max #), the geometric NBV # ms (target # ms).", NOT_KEPT),
+    ("Held-out test plants (seeds #-#; `python -m tpvp.learning evaluate --executed 1 2`, the shipped weights on the "
+     "dataset's # test states, # of them after one view and # after two): MA-SCVP recall # and precision # of the "
+     "label set at # (after two views, the state it sees in Table I: recall #, precision #, # views predicted for # "
+     "in the label); PC-NBV Spearman # between predicted and true gains (# on one-view states, # on two-view states), "
+     "the chosen view's true-gain rank # on average (# % a best view)", _held_out),
+    ("This page said # on one-view states before the command printed it; # is what it prints.",
+     lambda: [EARLIER, NOT_KEPT]),
+    ("Table I on the # generated cases per view space (`tpvp experiments plants --methods ours ours-pc-nbv ma-scvp "
+     "ma-scvp-oracle`, # min on # workers)",
+     lambda: [str(int(_t1("generated", "hemisphere", "ours", name="table1_learned")["cases"])), NOT_KEPT, NOT_KEPT]),
+    ("| hemisphere | MA-SCVP (# PC-NBV view + network) | # ± # | # ± # | # ± # | # / # / # |",
+     lambda: [str(make_config("plant").nbv.warm_up_views), *_learned_row("hemisphere", "ma-scvp", "ma-scvp")]),
+    ("| hemisphere | MA-SCVP with oracle labels | # ± # | # ± # | # ± # | |",
+     lambda: _learned_row("hemisphere", "ma-scvp-oracle", None)),
+    ("| hemisphere | Ours | # ± # | # ± # | # ± # | # / # / # |",
+     lambda: _learned_row("hemisphere", "ours", "ours")),
+    ("| sphere | MA-SCVP (first # views only) | # ± # | # ± # | # ± # | # / # / # |",
+     lambda: [str(_views_of("hemisphere")), *_learned_row("sphere", "ma-scvp", "ma-scvp")]),
+    ("| sphere | MA-SCVP with oracle labels | # ± # | # ± # | # ± # | |",
+     lambda: _learned_row("sphere", "ma-scvp-oracle", None)),
+    ("| sphere | Ours | # ± # | # ± # | # ± # | # / # / # |", lambda: _learned_row("sphere", "ours", "ours")),
+    ("(its label-# weight is #, as in the released checkpoint): #-# views more than the exact set it learns, and still "
+     "#-# points less coverage. Even its oracle labels need #-# views here, because the label is the full cover of "
+     "every visible # mm voxel; the paper's # views at # % suggest its labels or voxels were coarser. On the sphere "
+     "both stay near # %", _over_prediction),
+    ("Real tomato pair (# cases each): MA-SCVP # views / # % (hemisphere), # / # % (sphere)", _real_ma_scvp),
+]
+
+
+def _warm_up_row(space: str, method: str, after_17: bool) -> list[str]:
+    r = shipped.shipped_rows("table1_learned")
+    r = r[(r["source"] == "generated") & (r["view_space"] == space) & (r["method"] == method)]
+    t = _t1("generated", space, method, name="table1_learned")
+    out = [_f(100 * r["coverage_after_warm_up"].mean(), 1), f"{r['warm_up_rank'].median():g}",
+           str(_views_of(space) - 1)]
+    if after_17:
+        out += ["17", f"{r[r['initial_view'] == 17]['warm_up_rank'].median():g}"]
+    return out + [_f(r["chamfer_truth_mm"].mean(), 3), _f(t["views_mean"]), _f(t["coverage_mean"]),
+                  _f(t["path_length_m_mean"])]
+
+
+def _same_plans() -> list[str]:
+    views, coverage = [], []
+    for space in ("hemisphere", "sphere"):
+        a, b = (_t1("generated", space, m, name="table1_learned") for m in ("ours", "ours-pc-nbv"))
+        views.append(abs(a["views_mean"] - b["views_mean"]))
+        coverage.append(abs(a["coverage_mean"] - b["coverage_mean"]))
+    real = [_t1("bundled", "hemisphere", m, name="table1_learned")["views_mean"] for m in ("ours", "ours-pc-nbv")]
+    return [_f(max(views), 1), _f(max(coverage)), _f(real[1] - real[0], 1)]
+
+
+_WARM_UP = [
+    ("same # generated cases",
+     lambda: [str(int(_t1("generated", "hemisphere", "ours-pc-nbv", name="table1_learned")["cases"]))]),
+    ("| hemisphere | geometric | # % | # of # (after view #: #) | # | # | # | # |",
+     lambda: _warm_up_row("hemisphere", "ours", True)),
+    ("| hemisphere | PC-NBV | # % | # of # (after view #: #) | # | # | # | # |",
+     lambda: _warm_up_row("hemisphere", "ours-pc-nbv", True)),
+    ("| sphere | geometric | # % | # of # | # | # | # | # |", lambda: _warm_up_row("sphere", "ours", False)),
+    ("| sphere | PC-NBV | # % | # of # (hemisphere views only) | # | # | # | # |",
+     lambda: _warm_up_row("sphere", "ours-pc-nbv", False)),
+    ("the final plans are the same within # view and # points; on the real tomato pair it costs # views in the "
+     "hemisphere", _same_plans),
+]
+
+
+# ---------------------------------------------------------------- sources: README.md
+def _exit_codes() -> list[str]:
+    from tpvp import errors
+
+    return ["0", "1", str(errors.TpvpError.exit_code), str(errors.BusyError.exit_code),
+            str(errors.OutputWriteError.exit_code), "130" if "return 130" in (ROOT / "tpvp" / "errors.py").read_text()
+            else "no 130"]
+
+
+def _capture_fusion() -> list[str]:
+    from data_tools.capture.fusion import SCALES
+
+    tables = _md_tables("capture_fusion")
+    fused = next(rows_ for t, rows_ in tables.items() if t.startswith("Fused cloud"))
+    speed = tables["Fusion speed"][0]
+    chamfer = {scale: [float(r["seen: chamfer_mm"]) for r in fused if r["scale"] == scale]
+               for scale in ("plant", "row")}
+    cores = re.search(r"on (\d+) cores", _md_header("capture_fusion")).group(1)
+    return [_f(min(chamfer["plant"]), 1), _f(max(chamfer["plant"]), 1), f"{1000 * SCALES['plant'].voxel_size:g}",
+            _f(min(chamfer["row"]), 1), _f(max(chamfer["row"]), 1), f"{100 * SCALES['row'].voxel_size:g}",
+            speed["frames"], f"{float(speed['fusion s (read + integrate + extract + support)']):.0f}", cores]
+
+
+def _coverage_rule() -> list[str]:
+    from tpvp.config import CALIBRATED_MISS_RATIO, SelectionConfig
+
+    room = SelectionConfig(coverage_target=0.9).planning_target("room1")  # a view space without a calibrated ratio
+    return [f"{CALIBRATED_MISS_RATIO['hemisphere']:g}", f"{CALIBRATED_MISS_RATIO['sphere']:g}",
+            f"{min(CALIBRATED_MISS_RATIO.values()):g}", _f(100 * room, 1)]
+
+
+def _readme_rows_row(reference: str = "handheld") -> list[str]:
+    ours = _t6(reference, "ours", resolution=4)
+    return ["4", _f(ours["views_mean"], 1), _f(ours["views_std"], 1), _f(ours["coverage_mean"]),
+            _f(ours["coverage_std"]),
+            _f(ours["path_length_m_mean"], 1), _f(ours["path_length_m_std"], 1), _f(ours["paper_views"], 1),
+            _f(ours["paper_coverage"]), _f(ours["paper_path_length_m"])]
+
+
+def _readme_pose_noise() -> list[str]:
+    t = _table7()
+    largest = t[(t["sigma_t_m"] == t["sigma_t_m"].max()) & t["icp"]].iloc[0]
+    p = rows.paper_pose_noise()
+    paper = p[(p["sigma_t_m"] == largest["sigma_t_m"]) & (p["icp"] == "ON")].iloc[0]
+    return [f"{largest['sigma_t_m']:g}", f"{largest['sigma_r_deg']:g}", _f(largest["chamfer_mm_mean"]),
+            _f(largest["chamfer_mm_std"]), _f(100 * largest["f1_10mm_mean"], 1), _f(paper["chamfer_mm_mean"]),
+            _f(paper["f1_1cm_mean"], 1)]
+
+
+_README_QUICK_START = [
+    ("About # s the first time (numba compiles the kernels it runs, ~# s), about #-# s after that.", NOT_KEPT),
+    ("(about # minutes, # GB)", NOT_KEPT),
+    ("(# done, # a bug, # bad input, # destination busy, # outputs not written, # interrupted)", _exit_codes),
+    # the demo's output files are written by `make demo` (outputs/demo), not kept in the repository
+    ("# views (# executed to start, # planned), # % of the oracle set covered, a # m path", NOT_KEPT),
+]
+_README_NOTEBOOKS = [
+    ("`make docs` takes # s after `make test` on a fresh clone (measured on # cores:", NOT_KEPT),
+    ("site builds in # s); a notebook or library changed since then runs again in reader's mode first (#-# s each",
+     NOT_KEPT),
+]
+_README_PHONE = [
+    ("its tomatoes and maize lie #-# mm (Chamfer) from the generated plants at # mm voxels, its rows #-# mm at # cm, "
+     "and a #-frame capture fuses in # s on # cores", _capture_fusion),
+]
+_README_SESSION = [
+    ("(`--wait`, default # s)", lambda: [f"{__import__('tpvp.session.cli', fromlist=['WAIT_S']).WAIT_S:g}"]),
+]
+_README_ROBOT = [
+    ("stamped `--stamp` (default #:",
+     lambda: [re.search(r'"--stamp", default="(\d+)"',
+                        (ROOT / "tpvp" / "commands" / "export.py").read_text()).group(1)]),
+]
+_README_RULE = [
+    ("with `r` per view space: # on the hemisphere and # on the sphere (calibrated on generated plants), # in the "
+     "greenhouse rooms (not calibrated on rows: the most cautious). `T = 0.9` in a room therefore asks for # % of the "
+     "planning surface", _coverage_rule),
+]
+_README_GLANCE = [
+    ("Measured on a shared #-core machine", lambda: [_machine_cores()]),
+    ("| plants, hemisphere: Ours (views / coverage / path) | # ± # / # ± # % / # ± # m | # / # / # |",
+     lambda: _ours_row("generated", "hemisphere")),
+    ("| plants, sphere: Ours | # ± # / # ± # % / # ± # m | # / # / # |", lambda: _ours_row("generated", "sphere")),
+    ("| plants: Ours' views / the exact optimum's, same coverage | #x (hemisphere), #x (sphere) |",
+     lambda: [_optimum_ratio("generated", "hemisphere"), _optimum_ratio("generated", "sphere")]),
+    ("| greenhouse rows: Ours at # cm, handheld reference | # ± # / # ± # % / # ± # m | # / # / # |",
+     _readme_rows_row),
+    ("| rows: the same, candidate-filtered / complete reference | # ± # % / # ± # % | # |",
+     lambda: [v for r in ("candidates", "complete") for v in (_f(_t6(r, "ours", resolution=4)["coverage_mean"]),
+                                                              _f(_t6(r, "ours", resolution=4)["coverage_std"]))]
+     + [_f(_t6("candidates", "ours", resolution=4)["paper_coverage"])]),
+    ("| rows: passive sweep, handheld / candidates / complete reference | # / # / # % | # |",
+     lambda: [_f(_t6(r, "coarse")["coverage_mean"]) for r in ("handheld", "candidates", "complete")]
+     + [_f(_t6("handheld", "coarse")["paper_coverage"])]),
+    ("| rows, pose noise # m / #°, with ICP: Chamfer, F1 | # ± # mm, # % | # mm, # % |", _readme_pose_noise),
+    ("| learned MA-SCVP, hemisphere | # ± # / # ± # % / # ± # m | # / # / # |",
+     lambda: _ours_row("generated", "hemisphere", method="ma-scvp", paper="ma-scvp")),
+    ("| MA-SCVP after two views: recall / precision of the label set | # / # |", NOT_KEPT),  # `evaluate --executed 2`
+    ("| one view, reference sensor model (tomato at # mm) | # ms (OctoMap # ms, #x) |", NOT_KEPT),  # sensor_bench.py
+]
+
+
 _README = [
     ("| asking for # %: views, true coverage mean (min) | hemisphere #, # % (# %); sphere #, # % (# %) |",
      _coverage_target_row),
@@ -695,24 +2039,47 @@ _README = [
      "hemisphere # % (# %), #x; sphere # % (# %), #x |", _species_row),
 ]
 
-#: (document, region) -> sources. A region is a heading (its whole section) or (first line's start,
-#: the start of the line after it): only these are checked for coverage.
+#: (document, region) -> sources; the regions of a document partition it (every number lies in one).
+#: A region is a heading (its section) or (first line's start, the next line's start; None: the end).
+#: Its sources: (template, compute) pairs, or one :class:`Unsourced` for a region no file holds.
 SOURCES = {
-    ("docs/results.md", "## A season"): _SEASON,
+    ("docs/results.md", ("# Results (measured", "## Generated plants")):
+        [("Results (measured on this #-core machine)", lambda: [_machine_cores()])],
+    # benchmarks/plant_realism.py prints its table and writes no file: the section's numbers are its printout
+    ("docs/results.md", ("## Generated plants", "## Individual plants")): NOT_KEPT,
+    ("docs/results.md", ("## Individual plants", "## Coverage target")): _PLANTS,
+    ("docs/results.md", ("## Coverage target", "| asked | view space | views |")): _COVERAGE_TARGET,
+    ("docs/results.md", ("| asked | view space | views |", "A request of 99 %")): _coverage_target_sources(),
+    ("docs/results.md", ("A request of 99 %", "## Across species")): _COVERAGE_TARGET_PROSE,
+    ("docs/results.md", ("## Across species", "- *The coverage-target rule was left")): _SPECIES_INTRO,
     ("docs/results.md", ("- *The coverage-target rule was left", "At `--coverage-target 0.98`")): _SPECIES_CALIBRATION,
     ("docs/results.md", ("At `--coverage-target 0.98`", "The coverage holds on every species")): _SPECIES_OVERALL,
     ("docs/results.md", ("The coverage holds on every species", "Beside them, on the same protocol")):
         _SPECIES_TABLE + _per_species_sources(),
     ("docs/results.md", ("Beside them, on the same protocol", "A named organ's target also holds")): _SPECIES_ORGANS,
-    ("docs/results.md", ("| asked | view space | views |", "A request of 99 %")): _coverage_target_sources(),
+    ("docs/results.md", ("A named organ's target also holds", "## Re-planning")): _SPECIES_END,
+    ("docs/results.md", ("## Re-planning", "| asked | view space | optimum | one-shot views")): _REPLANNING,
     ("docs/results.md", ("| asked | view space | optimum | one-shot views", "Against the issue's targets at 0.98")):
         _replanning_sources(),
+    ("docs/results.md", ("Against the issue's targets at 0.98", "## A season")): _REPLANNING_END,
+    ("docs/results.md", "## A season"): _SEASON,
+    # benchmarks/nbv_rank.py writes its rows only with --output, and no such file is kept
+    ("docs/results.md", ("## Warm-up NBV quality", "## Greenhouse rows")): NOT_KEPT,
+    ("docs/results.md", ("## Greenhouse rows", "### Why Ours selects")): _ROWS,
+    ("docs/results.md", ("### Why Ours selects", "Table VII (`tpvp experiments rows")): _WHY_10_CM,
+    ("docs/results.md", ("Table VII (`tpvp experiments rows", "## Learned baselines")): _TABLE7,
+    ("docs/results.md", ("## Learned baselines", "### Warm-up NBV: geometric vs PC-NBV")): _LEARNED,
+    ("docs/results.md", ("### Warm-up NBV: geometric vs PC-NBV", None)): _WARM_UP,
+    ("README.md", ("## Quick start", "## Reading the notebooks")): _README_QUICK_START,
+    ("README.md", ("## Reading the notebooks", "## Your own scans")): _README_NOTEBOOKS,
+    ("README.md", ("## Your own scans", "## Planning a real session")): _README_PHONE,
+    ("README.md", ("## Planning a real session", "## Running a plan on a robot")): _README_SESSION,
+    ("README.md", ("## Running a plan on a robot", "## Opening a recording")): _README_ROBOT,
+    ("README.md", ("**Asking for less than everything.**", "## Results at a glance")): _README_RULE,
+    ("README.md", ("## Results at a glance", "## Data")): _README_GLANCE + _README,
 }
-#: README rows checked (each must be covered whole); the rest of its table is not yet.
-README_ROWS = {
-    "| asking for 98 %: views, true coverage mean (min) |": _README[:1],
-    "| 6 Helios evaluation species, asking for 98 %": _README[1:],
-}
+#: The documents whose every number must lie in a region of SOURCES.
+DOCUMENTS = ("docs/results.md", "README.md")
 
 
 def _template_regex(template: str) -> str:
@@ -722,11 +2089,19 @@ def _template_regex(template: str) -> str:
                    for part in parts if part)
 
 
-def _check(text: str, sources, where: str) -> int:
-    masked = _masked(text)
+def _numbers(masked: str):
+    return re.finditer(rf"(?<![\w.]){NUMBER}", masked)  # greedy: whole numbers
+
+
+def _check(text: str, sources, where: str, document: str | None = None) -> dict:
+    """Every number of ``text`` covered by a template of ``sources`` and, where it has a source, equal to
+    it as written; returns how many were checked and how many are declared :class:`Unsourced`."""
+    masked = _masked(text, document)
+    if isinstance(sources, Unsourced):
+        return {"checked": 0, "unsourced": sum(1 for _ in _numbers(masked))}
     covered = [False] * len(text)
     problems = []
-    checked = 0
+    counts = {"checked": 0, "unsourced": 0}
     for template, compute in sources:
         # templates are matched on the text as written (they may hold code spans)
         matches = list(re.finditer(_template_regex(template), text))
@@ -734,36 +2109,70 @@ def _check(text: str, sources, where: str) -> int:
             problems.append(f"{where}: template found {len(matches)} times: {template!r}")
             continue
         match = matches[0]
-        written = [g.replace(",", "") for g in match.groups()]
-        expected = list(compute())
-        checked += len(written)
-        if len(written) != len(expected) or not all(
-                e.matches(w) if isinstance(e, Printed) else w == str(e) for w, e in zip(written, expected)):
-            expected = [str(e) for e in expected]
-            problems.append(f"{where}: {template!r} writes {written}, its source gives {expected}")
         for i in range(match.start(), match.end()):
             covered[i] = True
-    for number in re.finditer(rf"(?<![\w.]){NUMBER}", masked):  # greedy: whole numbers
+        written = [g.replace(",", "") for g in match.groups()]
+        expected = compute()
+        if isinstance(expected, Unsourced):
+            counts["unsourced"] += len(written)
+            continue
+        expected = list(expected)
+        counts["unsourced"] += sum(isinstance(e, Unsourced) for e in expected)
+        counts["checked"] += sum(not isinstance(e, Unsourced) for e in expected)
+        if len(written) != len(expected) or not all(
+                isinstance(e, Unsourced) or (e.matches(w) if isinstance(e, Printed) else w == str(e))
+                for w, e in zip(written, expected)):
+            expected = ["-" if isinstance(e, Unsourced) else str(e) for e in expected]
+            problems.append(f"{where}: {template!r} writes {written}, its source gives {expected}")
+    for number in _numbers(masked):
         if not all(covered[number.start():number.end()]):
             line = text[:number.start()].count("\n") + 1
             context = text[max(0, number.start() - 40):number.end() + 20].replace("\n", " ")
-            problems.append(f"{where}, line {line} of the section: {number.group(0)!r} has no source: ...{context}...")
+            problems.append(f"{where}, line {line} of the region: {number.group(0)!r} has no source: ...{context}...")
     assert not problems, "\n".join(problems)
-    return checked
+    return counts
 
 
-@pytest.mark.parametrize("key", list(SOURCES), ids=[f"{d}:{h if isinstance(h, str) else h[0]}" for d, h in SOURCES])
-def test_every_number_of_the_section_is_read_back_from_its_source(key):
-    document, heading = key
-    assert _check(_section(document, heading), SOURCES[key], f"{document} {heading}") > 0
+def _region_id(key) -> str:
+    document, region = key
+    return f"{document}:{region if isinstance(region, str) else region[0]}"
 
 
-@pytest.mark.parametrize("prefix", list(README_ROWS))
-def test_every_number_of_the_readme_row_is_read_back_from_its_source(prefix):
-    rows = [line for line in (ROOT / "README.md").read_text().splitlines() if line.startswith(prefix)]
-    assert len(rows) == 1, prefix
-    # the command column is code, masked; the row's label and measured cells are checked
-    assert _check(rows[0], README_ROWS[prefix], f"README.md {prefix}") > 0
+@lru_cache(maxsize=None)
+def _region_counts(key) -> dict:
+    document, region = key
+    return _check(_section(document, region), SOURCES[key], _region_id(key), document)
+
+
+@pytest.mark.parametrize("key", list(SOURCES), ids=[_region_id(k) for k in SOURCES])
+def test_every_number_of_the_region_is_read_back_from_its_source(key):
+    counts = _region_counts(key)
+    assert counts["checked"] + counts["unsourced"] > 0
+
+
+@pytest.mark.parametrize("document", DOCUMENTS)
+def test_the_regions_cover_every_number_of_the_document(document):
+    text = (ROOT / document).read_text()
+    spans = sorted(_span(d, r) for d, r in SOURCES if d == document)
+    overlaps = [(a, b) for a, b in zip(spans, spans[1:]) if b[0] < a[1]]
+    assert not overlaps, f"{document}: regions overlap: {overlaps}"
+    outside = []
+    for number in _numbers(_masked(text, document)):
+        if not any(start <= number.start() < end for start, end in spans):
+            line = text[:number.start()].count("\n") + 1
+            context = text[max(0, number.start() - 40):number.end() + 20]
+            outside.append(f"line {line}: {number.group(0)!r}: ...{context}...")
+    assert not outside, f"{document}: numbers in no region of SOURCES:\n" + "\n".join(outside)
+
+
+#: How many quoted numbers have no source yet (:class:`Unsourced`), per document: may only shrink.
+UNSOURCED_AT_MOST = {"docs/results.md": 290, "README.md": 22}
+
+
+def test_the_unsourced_numbers_only_shrink():
+    for document in DOCUMENTS:
+        unsourced = sum(_region_counts(key)["unsourced"] for key in SOURCES if key[0] == document)
+        assert unsourced <= UNSOURCED_AT_MOST[document], (document, unsourced)
 
 
 def test_a_number_without_a_source_or_with_another_value_fails():
@@ -772,7 +2181,8 @@ def test_a_number_without_a_source_or_with_another_value_fails():
         _check(text, [("of # plans (lowest # %)", lambda: ["12", "95.95"])], "example")
     with pytest.raises(AssertionError, match="writes"):
         _check(text, [("took # of # plans (lowest # %)", lambda: ["3", "12", "95.96"])], "example")
-    assert _check(text, [("took # of # plans (lowest # %)", lambda: ["3", "12", "95.95"])], "example") == 3
+    counts = _check(text, [("took # of # plans (lowest # %)", lambda: ["3", "12", "95.95"])], "example")
+    assert counts == {"checked": 3, "unsourced": 0}
 
 
 def test_the_species_tables_record_the_split_and_the_seed():
