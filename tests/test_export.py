@@ -317,3 +317,60 @@ def test_an_existing_output_is_kept_unless_forced(plan_folder, session_folder, t
                                   "holds files that no tpvp run recorded as its own (mine.txt)")
     (out / "mine.txt").unlink()
     assert main(["export", fmt, str(source), "--output", str(out), "--force"]) == 0
+
+
+# --- a plan.csv that is not a plan (issue 47) ------------------------------------------------------
+
+def _plan_edit(line, column, value):
+    """plan.csv with one value replaced (line counting from 1, column from 0)."""
+    def edit(text):
+        lines = text.splitlines()
+        values = lines[line - 1].split(",")
+        values[column] = value
+        lines[line - 1] = ",".join(values)
+        return "\n".join(lines) + "\n"
+    return edit
+
+
+# damage of the plan_folder fixture's plan.csv (a comment line, the header, 6 views) -> the line's key text
+PLAN_FAULTS = {
+    "not a number": (_plan_edit(5, 8, "abc"), "plan.csv: line 5, column 'qx': 'abc' is not a number; correct it"),
+    "NaN": (_plan_edit(4, 2, "nan"), "plan.csv: line 4, column 'x': nan is not a finite number"),
+    "infinite": (_plan_edit(6, 7, "-inf"), "plan.csv: line 6, column 'look_z': -inf is not a finite number"),
+    "no value": (_plan_edit(3, 11, ""), "plan.csv: line 3, column 'qw': no value"),
+    "step not whole": (_plan_edit(3, 0, "0.5"), "plan.csv: line 3, column 'step': 0.5 is not a whole number"),
+    "zero quaternion": (lambda t: _plan_edit(3, 8, "0")(_plan_edit(3, 9, "0")(_plan_edit(3, 10, "0")(
+        _plan_edit(3, 11, "0")(t)))), "plan.csv: line 3, columns qx, qy, qz, qw: the quaternion's norm is 0, not 1"),
+    "missing column": (lambda t: t.replace(",qz,qw", ",qz"), "plan.csv: not a tpvp plan: its header (line 2) has no "
+                                                             "column qw; give a plan.csv written by tpvp plan"),
+    "truncated": (lambda t: t[: len(t) - 40], "plan.csv: line 8 has "),
+    "no views": (lambda t: "\n".join(t.splitlines()[:2]) + "\n",
+                 "plan.csv: the plan has no views (nothing after its header, line 2)"),
+    "empty": (lambda t: "", "plan.csv: empty: no header line"),
+}
+
+
+@pytest.mark.parametrize("fmt", ["moveit", "ros2", "colmap"])
+@pytest.mark.parametrize("fault", PLAN_FAULTS)
+def test_a_plan_that_is_not_one_is_one_line_naming_line_and_column(plan_folder, tmp_path, capsys, fmt, fault):
+    damage, expected = PLAN_FAULTS[fault]
+    plan = plan_folder / "plan.csv"
+    plan.write_text(damage(plan.read_text()))
+    output = tmp_path / ("goals.yaml" if fmt == "moveit" else "out")
+    _one_line_and_nothing_written(["export", fmt, plan, "--output", output], capsys, output, expected)
+
+
+def test_a_plan_edited_by_hand_reads_as_pandas_reads_it(plan_folder):
+    """Comments after values, blank lines and quaternions rounded to 3 decimals are a plan still."""
+    from tpvp.pipeline.robot import read_plan
+
+    lines = (plan_folder / "plan.csv").read_text().splitlines()
+    values = lines[2].split(",")
+    values[8:] = [f"{float(v):.3f}" for v in values[8:]]
+    lines[2] = ",".join(values) + "  # rounded by hand"
+    (plan_folder / "plan.csv").write_text("\n".join(lines[:3] + [""] + lines[3:]) + "\n")
+    table = read_plan(plan_folder)
+    expected = pd.read_csv(plan_folder / "plan.csv", comment="#")
+    assert list(table.columns) == list(expected.columns) and table["step"].tolist() == list(range(6))
+    assert table["role"].tolist() == expected["role"].tolist()
+    np.testing.assert_array_equal(table[expected.columns[2:]].to_numpy(), expected[expected.columns[2:]].to_numpy())

@@ -609,6 +609,51 @@ def _(tmp, scans, capsys):
     return run_cli(["session", "add", folder, "--cloud", scans / "day2.xyz", "--pose", "3"], capsys)
 
 
+@row("session-prediction-damaged", 2, "tpvp session plan: error: ", "plan/prediction.npz is damaged (truncated?",
+     "`tpvp session check", "--repair` will drop the plan (run `tpvp session plan` again)")
+def _(tmp, scans, capsys):
+    # the audit's case: a planned view captured, then the prediction its re-plan reads damaged
+    folder = session(tmp, scans, capsys)
+    for _ in range(2):  # the initial view and the warm-up NBV
+        assert run_cli(["session", "add", folder, "--cloud", scans / "day2.xyz"], capsys)[0] == 0
+    assert run_cli(["session", "plan", folder], capsys)[0] == 0
+    assert run_cli(["session", "add", folder, "--cloud", scans / "day2.xyz"], capsys)[0] == 0
+    prediction = folder / "plan" / "prediction.npz"
+    prediction.write_bytes(prediction.read_bytes()[:100])
+    code, out, err = run_cli(["session", "check", folder], capsys)
+    assert code == 2 and "problem: " in out and "prediction.npz is damaged" in out, (out, err)
+    return run_cli(["session", "plan", folder], capsys)
+
+
+@row("plan-csv-not-a-number", 2, "tpvp export: error: ", "plan.csv: line 4, column 'qx': '0.12.3' is not a number",
+     "correct it, or write the plan again")
+def _(tmp, capsys):
+    plan = plan_folder(tmp) / "plan.csv"
+    lines = plan.read_text().splitlines()
+    lines[3] = ",".join("0.12.3" if i == 8 else value for i, value in enumerate(lines[3].split(",")))
+    plan.write_text("\n".join(lines) + "\n")
+    return run_cli(["export", "moveit", plan.parent, "--output", tmp / "goals.yaml"], capsys)
+
+
+@row("organ-targets-twice", 2, "tpvp plan: error: selection.organ_targets: 'fruit' is given twice (fruit=1.0, "
+     "fruit=0.9)", "give each organ one share")
+def _(tmp, scans, capsys):
+    return run_cli(plan(scans / "day1.xyz", scans / "day2.xyz", "--organ-targets", "fruit=1.0,fruit=0.9",
+                        output=tmp / "out"), capsys)
+
+
+@row("organ-targets-absent-organ", 2, "tpvp session plan: error: organ targets flower=1: ",
+     "labelled.xyz has no flower point (its organs: stem ", " points, leaf ", "target an organ it has")
+def _(tmp, scans, capsys):
+    pts = points(scans)
+    labels = np.where(pts[:, 2] < np.percentile(pts[:, 2], 20), 1, 2)  # Pheno4D's: 1 stem, 2+ leaves
+    np.savetxt(tmp / "labelled.xyz", np.column_stack([pts, labels]), fmt="%.4f %.4f %.4f %d")
+    folder = tmp / "session"
+    assert run_cli(["session", "start", "--previous", tmp / "labelled.xyz", "--labels", "pheno4d", "--output", folder],
+                   capsys)[0] == 0
+    return run_cli(["session", "plan", folder, "--organ-targets", "flower=1.0"], capsys)
+
+
 @row("session-interrupted-after-commit", 0, "tpvp session add: SIGINT received after capture 1 was recorded; the "
      "step is complete")
 def _(tmp, scans, capsys):

@@ -207,3 +207,68 @@ def test_a_named_organ_s_target_holds_its_neighbours_when_stricter():
                                   [0, 1, 1, 2, 1])
     groups, _ = organ_groups(organs, {"leaf": 0.9}, 1.0, "prior", keys, margin=1)
     np.testing.assert_array_equal(groups, [1, 0, 0, 1, 0])  # a looser neighbour never lowers a share
+
+
+# --- per-organ targets that cannot be what was meant (issue 47) ------------------------------------
+
+@pytest.fixture(scope="module")
+def leafy_pair():
+    """A generated pair with organ labels: stem, leaf and petiole, no flower or fruit."""
+    pair = generate_session_pair("tomato", 1)
+    return pair, tuple(part_organ_codes(s.part_kinds, s.part) for s in (pair.previous, pair.current))
+
+
+def test_an_organ_given_twice_is_refused_naming_it():
+    config = make_config("plant")
+    with pytest.raises(ConfigError, match=r"'fruit' is given twice \(fruit=1.0, fruit=0.9\); give each organ one"):
+        replace(config.selection, organ_targets="fruit=1.0,leaf=0.9,fruit=0.9")
+    assert replace(config.selection, organ_targets="fruit=1.0,leaf=0.9").organ_target_values() == {"fruit": 1.0,
+                                                                                                  "leaf": 0.9}
+
+
+def test_a_target_on_an_organ_without_points_names_it_and_the_organs_there_are():
+    from tpvp.scene.organs import check_organ_targets
+
+    organs = np.array([CODE["stem"]] * 3 + [CODE["leaf"]] * 1200)
+    with pytest.raises(ConfigError) as refused:
+        check_organ_targets({"leaf": 0.9, "flower": 1.0, "fruit": 0.95}, organs, "day1.ply")
+    assert str(refused.value) == ("organ targets flower=1,fruit=0.95: day1.ply has no flower or fruit point (its "
+                                  "organs: stem 3 points, leaf 1,200 points); target an organ it has, or check the "
+                                  "scan and its --labels")
+    check_organ_targets({"leaf": 0.9, "stem": 1.0}, organs, "day1.ply")  # organs it has
+    check_organ_targets({"fruit": 1.0}, None, "day1.ply")  # no labels: the planner's own line
+
+
+def test_a_session_refuses_a_target_on_an_absent_organ_at_start_and_plan(leafy_pair, tmp_path, capsys):
+    from tpvp.session import Session
+    from tpvp.session.check import ORGANS_FILE
+
+    pair, (previous_organs, _) = leafy_pair
+    previous = write_point_cloud(tmp_path / "previous.ply", pair.previous.points, labels=previous_organs)
+    start = ["session", "start", "--previous", str(previous), "--units", "m", "--labels", "organ"]
+    assert main([*start, "--organ-targets", "fruit=1.0", "--output", str(tmp_path / "refused")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "previous.ply has no fruit point (its organs: stem " in err[0], err
+    assert not (tmp_path / "refused").exists()
+    folder = tmp_path / "session"
+    assert main([*start, "--output", str(folder)]) == 0
+    state = (folder / "session.json").read_text()
+    assert main(["session", "plan", str(folder), "--organ-targets", "leaf=0.9,flower=1.0"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("tpvp session plan: error: organ targets flower=1: ") and \
+        "has no flower point" in err[0], err
+    assert (folder / "session.json").read_text() == state and not (folder / "plan").exists()
+    # the labels are named in the state: their file deleted is damage, not a session without labels
+    (folder / ORGANS_FILE).unlink()
+    assert any("previous_organs.npy (the previous model's organ labels) is missing" in p.what
+               for p in Session.problems(folder))
+
+
+def test_tpvp_plan_refuses_a_target_on_an_absent_organ(leafy_pair, tmp_path, capsys):
+    pair, organs = leafy_pair
+    scans = [write_point_cloud(tmp_path / f"{name}.ply", s.points, labels=codes)
+             for name, s, codes in (("previous", pair.previous, organs[0]), ("current", pair.current, organs[1]))]
+    assert main(["plan", "--previous", str(scans[0]), "--current", str(scans[1]), "--units", "m", "--labels", "organ",
+                 "--organ-targets", "fruit=1.0", "--set", "registration.embedded_deformation.iterations=5",
+                 "--output", str(tmp_path / "plan")]) == 2
+    assert "previous.ply has no fruit point" in capsys.readouterr().err

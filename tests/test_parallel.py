@@ -53,6 +53,8 @@ _POOL = """
 import os, signal, sys, threading, time
 from tpvp.parallel import run_cases
 
+signal.signal(signal.SIGINT, signal.default_int_handler)  # a test worker may pass SIGINT on ignored
+
 if __name__ == "__main__":
     threading.Timer(2.0, os.kill, (os.getpid(), signal.SIGINT)).start()  # to the process, as Ctrl-C
     start = time.monotonic()

@@ -212,7 +212,8 @@ def test_a_file_output_is_locked_checked_and_replaced_whole(tmp_path):
 
 
 _INTERRUPTED_FILE = """
-import json, sys
+import json, signal, sys
+signal.signal(signal.SIGINT, signal.default_int_handler)  # a test worker may pass SIGINT on ignored
 from pathlib import Path
 from tpvp.io import atomic_write_text, faults
 from tpvp.io.publish import RunInterrupted, staged_file

@@ -4,9 +4,12 @@ stop signals across a step. The concurrent and signal tries come from
 ``benchmarks/session_faults.py``, which runs every pair and delay and 50 signal moments."""
 
 import json
+import os
 import shutil
 import signal
+import sys
 
+import numpy as np
 import pytest
 
 from helpers import benchmark_module, tree_digest
@@ -85,6 +88,32 @@ def _edit_state(change):
     return edit
 
 
+def _edit_line(name, line, column, value):
+    """Replace one value of a CSV file's line (counting from 1) and column (from 0)."""
+    def edit(folder):
+        lines = (folder / name).read_text().splitlines()
+        values = lines[line - 1].split(",")
+        values[column] = value
+        lines[line - 1] = ",".join(values)
+        (folder / name).write_text("\n".join(lines) + "\n")
+    return edit
+
+
+def _cut_lines(name, keep):
+    """Cut a text file after its first ``keep`` lines (a truncation at a line's end: every line left reads)."""
+    def cut(folder):
+        (folder / name).write_text("\n".join((folder / name).read_text().splitlines()[:keep]) + "\n")
+    return cut
+
+
+def _prediction_of_another_plan(folder):
+    from tpvp.pipeline.replan import Prediction
+
+    path = folder / "plan/prediction.npz"
+    prediction = Prediction.from_bytes(path.read_bytes())
+    path.write_bytes(Prediction(prediction.centres, prediction.resolution, prediction.visibility, 5).to_bytes())
+
+
 # kind -> (damage, the line's key text, repairable)
 DAMAGES = {
     "capture file gone": (lambda f: (f / "captures/001.npy").unlink(),
@@ -112,6 +141,34 @@ DAMAGES = {
     "version from the future": (_edit_state(lambda s: s.update(version=2, tpvp="9.0")),
                                 "a session of format version 2 (tpvp 9.0); this tpvp reads version 1: update tpvp",
                                 False),
+    # every other file a step reads (issue 47): the plan's, the configuration, the organ labels
+    "prediction truncated": (lambda f: _truncate(f / "plan/prediction.npz"),
+                             "plan/prediction.npz is damaged (truncated?", True),
+    "prediction gone": (lambda f: (f / "plan/prediction.npz").unlink(), "plan/prediction.npz is missing (deleted?)",
+                        True),
+    "prediction of another plan": (_prediction_of_another_plan,
+                                   "plan/prediction.npz is the prediction of a plan made after 5 captures", True),
+    "plan.csv not a number": (_edit_line("plan/plan.csv", 5, 9, "0.12.3"),
+                              "plan/plan.csv is damaged (line 5, column 'qx': '0.12.3' is not a number)", True),
+    "plan.csv infinite": (_edit_line("plan/plan.csv", 4, 3, "inf"),
+                          "plan/plan.csv is damaged (line 4, column 'x': inf is not a finite number)", True),
+    "plan.csv cut at a line's end": (_cut_lines("plan/plan.csv", 8),
+                                     "plan/plan.csv is damaged (truncated? it holds 4 planned views, session.json's "
+                                     "plan 6)", True),
+    "plan.json truncated": (lambda f: _truncate(f / "plan/plan.json"),
+                            "plan/plan.json is damaged (truncated? not valid JSON", True),
+    "plan record edited": (_edit_state(lambda s: s["plan"].update(views_so_far="2")),
+                           "session.json: the plan's 'views_so_far' is not a count (edited by hand?)", True),
+    "planned view out of range": (_edit_state(lambda s: s["plan"]["planned_views"].__setitem__(0, 99)),
+                                  "session.json: the plan names view 99, but this session's views are 0..31", True),
+    "configuration truncated": (_cut_lines("config.yaml", 60),
+                                "config.yaml (the session's configuration) is damaged (truncated? it has no ", False),
+    "organ labels gone": (_edit_state(lambda s: s.update(previous_organs="previous_organs.npy")),
+                          "previous_organs.npy (the previous model's organ labels) is missing (deleted?)", False),
+    "organ labels damaged": (lambda f: np.save(f / "previous_organs.npy", np.full(len(np.load(f / "previous.npy")), 9)),
+                             "previous_organs.npy (the previous model's organ labels) holds the organ code 9", False),
+    "previous model empty": (lambda f: np.save(f / "previous.npy", np.zeros((0, 3))),
+                             "previous.npy (the previous model) holds no points", False),
 }
 
 
@@ -159,6 +216,59 @@ def test_repair_drops_what_is_gone_removes_orphans_and_the_session_goes_on(plann
     assert main(["session", "add", str(planned), "--cloud", str(bench["cloud3"])]) == 0
     assert Session.open(planned).captures[-1]["file"] == "captures/001.npy"
     assert Session.problems(planned) == []
+
+
+def test_a_damaged_prediction_is_one_line_for_the_re_plan_and_repaired_by_planning_again(planned, bench, capsys):
+    """Issue 47's case: a planned view captured, then the prediction the re-plan reads damaged."""
+    assert main(["session", "add", str(planned), "--cloud", str(bench["cloud5"])]) == 0
+    _truncate(planned / "plan/prediction.npz")
+    capsys.readouterr()
+    assert main(["session", "plan", str(planned)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "plan/prediction.npz is damaged (truncated?" in err[0], err
+    assert main(["session", "check", str(planned), "--repair"]) == 0
+    out = capsys.readouterr().out
+    assert "repair: drop the plan (run `tpvp session plan` again)" in out and "3 captures, no plan yet" in out
+    assert main(["session", "plan", str(planned)]) == 0
+    assert Session.problems(planned) == []
+
+
+_READS = []  # while a list is appended here, the files opened for reading under its folder
+
+
+def _record_reads(event, args):
+    if event != "open" or not _READS or not isinstance(args[0], (str, os.PathLike)):
+        return
+    mode, flags = args[1], args[2]
+    writes = any(c in mode for c in "wax+") if isinstance(mode, str) else flags & (os.O_WRONLY | os.O_RDWR)
+    folder, reads = _READS[-1]
+    path = os.path.abspath(os.fspath(args[0]))
+    if not writes and path.startswith(f"{folder}{os.sep}"):
+        reads.add(os.path.relpath(path, folder))
+
+
+def _reads(folder, argv) -> set:
+    """The files under ``folder`` that ``tpvp session ARGV`` opens for reading (its exit status 0)."""
+    reads = set()
+    _READS.append((os.path.abspath(folder), reads))
+    try:
+        assert main(["session", *map(str, argv)]) == 0, argv
+    finally:
+        _READS.clear()
+    return reads
+
+
+def test_check_reads_every_file_a_step_reads(planned, bench, tmp_path):
+    """Each file a step opens (a capture added, the re-plan it asks for, the export) is one that
+    `session check` reads: damage anywhere is found before a step meets it."""
+    sys.addaudithook(_record_reads)  # idle (one test of a list) once this test is done
+    steps = set()
+    for argv in (["add", planned, "--cloud", bench["cloud5"]], ["plan", planned],
+                 ["export", planned, "--model", tmp_path / "today.ply"]):
+        steps |= _reads(planned, argv)
+    checked = _reads(planned, ["check", planned])
+    assert {"plan/prediction.npz", "previous.npy", "config.yaml", "session.json"} <= steps
+    assert steps <= checked, sorted(steps - checked)
 
 
 def test_check_on_a_sound_folder(planned, capsys):

@@ -216,7 +216,7 @@ class SelectionConfig:
         """``organ_targets`` (``"fruit=1.0,leaf=0.95"``: organ classes of
         :data:`tpvp.scene.organs.ORGANS` and the share of each one's predicted planning voxels the
         selection must see) as a mapping; the organs it does not name keep the planning target."""
-        values = {}
+        values, given = {}, {}
         for item in filter(None, (part.strip() for part in str(self.organ_targets or "").split(","))):
             name, _, value = item.partition("=")
             name = name.strip()
@@ -227,7 +227,10 @@ class SelectionConfig:
             if name not in ORGANS or not 0 <= number <= 1:
                 raise ConfigError(f"selection.organ_targets: {item!r} is not ORGAN=SHARE with ORGAN one of "
                                   f"{', '.join(ORGANS)} and SHARE in [0, 1] (e.g. fruit=1.0,leaf=0.95)")
-            values[name] = number
+            if name in values:  # which share was meant is not ours to guess (the last one used to win)
+                raise ConfigError(f"selection.organ_targets: {name!r} is given twice ({given[name]}, {item}); give "
+                                  f"each organ one share (e.g. fruit=1.0,leaf=0.95)")
+            values[name], given[name] = number, item
         return values
 
     def planning_target(self, view_space: str) -> float:

@@ -15,7 +15,7 @@ from tpvp.io.publish import staged_folder
 from tpvp.io.units import plant_size_warning
 from tpvp.pipeline.jit import compile_kernels, plant_pieces
 from tpvp.scene.normalise import check_session_pair
-from tpvp.scene.organs import LABEL_KINDS, organ_codes
+from tpvp.scene.organs import LABEL_KINDS, check_organ_targets, organ_codes
 from tpvp.scene.samples import load_sample
 from tpvp.viz.background import drawing_pool
 
@@ -119,6 +119,7 @@ def _labelled_scan(path, args):
 def _plan(args) -> int:
     config = resolved_config(args)
     previous, previous_units, previous_organs = _labelled_scan(args.previous, args)
+    check_organ_targets(config.selection.organ_target_values(), previous_organs, str(args.previous))
     current, current_units, current_organs = _labelled_scan(args.current, args)
     print(f"{args.previous.name}: units: {previous_units}; {args.current.name}: units: {current_units}")
     names = (str(args.previous), str(args.current))

@@ -8,18 +8,27 @@ camera, and its offset, is the robot's business: the goals are the camera's pose
 
 from __future__ import annotations
 
+import csv
 import json
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
-import pandas as pd
 import yaml
 
 from tpvp.errors import InputFileError
-from tpvp.io.plan import CAMERA_AXES
 from tpvp.sensor.camera import rigid_error, rotation_to_quaternion
 
+if TYPE_CHECKING:
+    import pandas as pd
+
 PLAN_COLUMNS = ("step", "role", "x", "y", "z", "look_x", "look_y", "look_z", "qx", "qy", "qz", "qw")
+#: The plan's columns that hold numbers (every one but ``role``), step first and the quaternion last.
+NUMBER_COLUMNS = tuple(name for name in PLAN_COLUMNS if name != "role")
+#: How far a plan's quaternion may be from a unit one (a plan edited by hand, rounded).
+QUATERNION_TOLERANCE = 1e-2
+PLAN_ADVICE = "correct it, or write the plan again (tpvp plan, tpvp session plan)"
+NOT_A_PLAN = "give a plan.csv written by tpvp plan or tpvp session plan"
 #: How far a transform's rotation may be from a proper rotation (orthonormal, determinant +1).
 RIGID_TOLERANCE = 1e-6
 
@@ -30,22 +39,87 @@ def plan_file(path) -> Path:
     return path / "plan.csv" if path.is_dir() else path
 
 
-def read_plan(path) -> pd.DataFrame:
-    """A plan written by ``tpvp plan`` / ``tpvp session plan`` (``plan.csv``, or the folder holding
-    it), its views in execution order; one clear error for anything else."""
+class PlanFileError(InputFileError):
+    """A plan file that is not a tpvp plan; ``fault`` is what is wrong, without the file's name or
+    the advice (``tpvp session check`` words its own)."""
+
+    def __init__(self, path, fault: str, advice: str = PLAN_ADVICE):
+        super().__init__(f"{path}: {fault}; {advice}")
+        self.path, self.fault = path, fault
+
+
+def plan_values(text: str, path) -> tuple[list[str], list[list[str]], np.ndarray]:
+    """``(columns, each view's fields, each view's numbers)`` of a ``plan.csv``'s text (the numbers:
+    :data:`PLAN_COLUMNS` but ``role``, finite, as float64). A line's ``#`` starts a comment, as
+    ``pandas.read_csv(comment="#")`` reads it. :class:`PlanFileError` names the line and the column
+    of the first value that is not a finite number, a missing column, a plan without views."""
+    lines = [(number, line.split("#", 1)[0]) for number, line in enumerate(text.splitlines(), 1)]
+    lines = [(number, line) for number, line in lines if line.strip()]
+    if not lines:
+        raise PlanFileError(path, "empty: no header line (step,role,x,y,z,...)", NOT_A_PLAN)
+    (header_line, header), rows = lines[0], lines[1:]
+    columns = [name.strip() for name in next(csv.reader([header]))]
+    missing = [name for name in PLAN_COLUMNS if name not in columns]
+    if missing:
+        raise PlanFileError(path, f"not a tpvp plan: its header (line {header_line}) has no column "
+                                  f"{', '.join(missing)}", NOT_A_PLAN)
+    twice = sorted({name for name in columns if columns.count(name) > 1})
+    if twice:
+        raise PlanFileError(path, f"its header (line {header_line}) names the column {twice[0]!r} twice", NOT_A_PLAN)
+    if not rows:
+        raise PlanFileError(path, f"the plan has no views (nothing after its header, line {header_line})", NOT_A_PLAN)
+    where = [columns.index(name) for name in NUMBER_COLUMNS]
+    fields, numbers = [], np.empty((len(rows), len(NUMBER_COLUMNS)))
+    for row, (number, line) in enumerate(rows):
+        values = next(csv.reader([line]))
+        if len(values) != len(columns):
+            raise PlanFileError(path, f"line {number} has {len(values)} values, its header (line {header_line}) "
+                                      f"{len(columns)} columns (truncated?)")
+        for column, (name, at) in enumerate(zip(NUMBER_COLUMNS, where)):
+            value = values[at].strip()
+            try:
+                numbers[row, column] = float(value)
+            except ValueError:
+                what = f"{value!r} is not a number" if value else "no value"
+                raise PlanFileError(path, f"line {number}, column {name!r}: {what}") from None
+            if not np.isfinite(numbers[row, column]):
+                raise PlanFileError(path, f"line {number}, column {name!r}: {value} is not a finite number")
+        if not numbers[row, 0].is_integer():
+            raise PlanFileError(path, f"line {number}, column 'step': {values[where[0]].strip()} is not a whole number")
+        norm = np.linalg.norm(numbers[row, -4:])
+        # A rotation's quaternion is a unit one; one far off it is a wrong value, not rounding.
+        if abs(norm - 1) > QUATERNION_TOLERANCE:
+            raise PlanFileError(path, f"line {number}, columns qx, qy, qz, qw: the quaternion's norm is {norm:.3g}, "
+                                      f"not 1")
+        fields.append(values)
+    return columns, fields, numbers
+
+
+def read_plan_values(path) -> tuple[list[str], list[list[str]], np.ndarray]:
+    """:func:`plan_values` of the ``plan.csv`` that ``path`` names (itself, or the one in the folder)."""
     path = plan_file(path)
     if not path.is_file():
         raise InputFileError(f"{path}: no such plan (a plan.csv written by tpvp plan or tpvp session plan)")
     try:
-        table = pd.read_csv(path, comment="#")
-    except (OSError, ValueError, pd.errors.ParserError) as exc:
-        raise InputFileError(f"{path}: not a readable plan ({exc})") from None
-    missing = [c for c in PLAN_COLUMNS if c not in table.columns]
-    if missing:
-        raise InputFileError(f"{path}: not a tpvp plan: missing columns {', '.join(missing)}")
-    numbers = table[[c for c in PLAN_COLUMNS if c != "role"]]
-    if table.empty or not np.isfinite(numbers.to_numpy(dtype=np.float64)).all():
-        raise InputFileError(f"{path}: the plan has no views or a value that is not a finite number")
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise InputFileError(f"{path}: cannot read the plan ({exc.strerror or exc})") from None
+    except UnicodeDecodeError as exc:
+        raise PlanFileError(path, f"not text (byte {exc.object[exc.start]:#04x} at offset {exc.start})",
+                            NOT_A_PLAN) from None
+    return plan_values(text, path)
+
+
+def read_plan(path) -> pd.DataFrame:
+    """A plan written by ``tpvp plan`` / ``tpvp session plan`` (``plan.csv``, or the folder holding
+    it), its views in execution order; one clear error for anything else (:func:`plan_values`)."""
+    import pandas as pd  # not for a session step that only checks its plan
+
+    columns, fields, numbers = read_plan_values(path)
+    table = pd.DataFrame(fields, columns=columns)
+    for column, name in enumerate(NUMBER_COLUMNS):
+        table[name] = numbers[:, column]
+    table["step"] = table["step"].astype(np.int64)
     return table
 
 
@@ -111,6 +185,8 @@ def moveit_goals(table: pd.DataFrame, frame: str, matrix: np.ndarray, source: st
               "position": {"x": float(row.x), "y": float(row.y), "z": float(row.z)},
               "orientation": {"x": float(row.qx), "y": float(row.qy), "z": float(row.qz), "w": float(row.qw)}}
              for row in moved_plan(table, matrix).itertuples()]
+    from tpvp.io.plan import CAMERA_AXES  # pandas: not for a session step that only checks its plan
+
     document = {"frame_id": frame, "units": "m", "camera_axes": CAMERA_AXES, "source": source,
                 "base_from_scan": matrix.tolist(), "pose_goals": goals}
     return ("# tpvp plan as MoveIt pose goals: the camera's pose at each view, in execution order\n"

@@ -83,3 +83,18 @@ def reduced_organs(reduced, points, organs, resolution: float):
     if organs is None or len(reduced) == len(points):
         return organs
     return voxel_organs(voxels.voxel_keys(reduced, resolution), resolution, points, organs)
+
+
+def check_organ_targets(targets: dict, organs, name: str) -> None:
+    """Refuse per-organ ``targets`` (organ -> share) naming an organ that no point of the labelled
+    previous model ``name`` holds (``organs``: its points' codes; None, no labels, is the planner's
+    own error): a share of nothing is met by any plan, so the target is a typo or the wrong scan."""
+    if not targets or organs is None:
+        return
+    counts = np.bincount(np.asarray(organs, dtype=np.int64).ravel(), minlength=len(ORGANS))
+    absent = [organ for organ in targets if counts[CODE[organ]] == 0]
+    if absent:
+        asked = ",".join(f"{organ}={targets[organ]:g}" for organ in absent)
+        has = ", ".join(f"{ORGANS[code]} {counts[code]:,} points" for code in np.flatnonzero(counts))
+        raise ConfigError(f"organ targets {asked}: {name} has no {' or '.join(absent)} point (its organs: {has}); "
+                          f"target an organ it has, or check the scan and its --labels")

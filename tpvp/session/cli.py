@@ -90,7 +90,7 @@ def session_arguments(session) -> None:
     check.add_argument("folder", type=Path, help="the session folder")
     check.add_argument("--repair", action="store_true",
                        help="drop the captures whose files are gone or damaged, remove files no capture names, "
-                            "drop a plan whose files are gone; says what it does first")
+                            "drop a plan whose record or files are gone or damaged; says what it does first")
     _wait_option(check)
     check.set_defaults(func=_session_check)
 

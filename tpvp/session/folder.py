@@ -25,14 +25,14 @@ import numpy as np
 
 from tpvp import __version__
 from tpvp.config import config_yaml, load_config
-from tpvp.errors import BusyError, ConfigError, InputFileError, PointCloudError, checked_cloud
+from tpvp.errors import BusyError, ConfigError, InputFileError, PointCloudError, TpvpError, checked_cloud
 from tpvp.io import atomic_write_bytes, atomic_write_text, write_point_cloud
 from tpvp.io.publish import hold_folder, staged_folder
 from tpvp.scene import voxels
 from tpvp.sensor.camera import look_at_rotation, rotation_to_quaternion
 from tpvp.session.captures import Pose, back_project, surface_voxel_keys
-from tpvp.session.check import (FORMAT, ORGANS_FILE, STATE, VERSION, capture_number, centroid_file, folder_problems,
-                                 state_text)
+from tpvp.session.check import (DROP_PLAN, FORMAT, ORGANS_FILE, PREDICTION_FILE, STATE, VERSION, Problem,
+                                 capture_number, centroid_file, folder_problems, prediction_views, state_text)
 
 #: How another command is told to wait for the folder: the session's own advice, not another folder.
 BUSY_ADVICE = "run this command again when that one has finished (--wait SECONDS waits longer)"
@@ -125,8 +125,11 @@ class Session:
             previous_organs = np.asarray(previous_organs, dtype=np.int64)
             if previous_organs.shape != (len(points),):
                 raise ConfigError(f"{previous_file}: {len(previous_organs)} organ labels for {len(points)} points")
+        kind.check_organ_targets(config, previous_organs, str(previous_file))
         state = {"format": FORMAT, "version": VERSION, "tpvp": __version__, "kind": config.setting,
                  "created_utc": _now(), "previous_file": str(previous_file), "units": units, "captures": []}
+        if previous_organs is not None:
+            state["previous_organs"] = ORGANS_FILE  # named, so that the file deleted is a problem, not "no labels"
         session = kind(folder, config, state, points, previous_organs)
         with cls.locked(folder, wait):
             if (Path(folder) / STATE).is_file():  # checked under the lock: two starts cannot both pass
@@ -145,10 +148,11 @@ class Session:
         """Hold ``folder``'s lock for a block (:func:`tpvp.io.publish.hold_folder`), as a step does."""
         return hold_folder(folder, what="session folder", wait=wait, on_wait=on_wait, advice=BUSY_ADVICE)
 
-    @staticmethod
-    def problems(folder) -> list:
-        """Every problem of the session folder (:func:`tpvp.session.check.folder_problems`)."""
-        return folder_problems(folder, KINDS)
+    @classmethod
+    def problems(cls, folder) -> list:
+        """Every problem of the session folder (:func:`tpvp.session.check.folder_problems`); when its
+        files are sound, those of the session they make (:meth:`_opened`)."""
+        return folder_problems(folder, KINDS) or cls._opened(folder)[1]
 
     @classmethod
     @contextlib.contextmanager
@@ -166,26 +170,52 @@ class Session:
         return config
 
     @classmethod
+    def check_organ_targets(cls, config, organs, name: str) -> None:
+        """Refuse ``config``'s organ targets before any work when this kind plans them (a plant)."""
+
+    @classmethod
     def open(cls, folder) -> "Session":
         """The session in ``folder``; one clear error (:class:`~tpvp.errors.InputFileError`) for a
         folder that is not one, is damaged or is of another version: its first problem and what to
         do (``tpvp session check`` lists them all)."""
         folder = Path(folder)
-        problems = cls.problems(folder)
+        problems = folder_problems(folder, KINDS)
+        session, more = (None, []) if problems else cls._opened(folder)
+        problems += more
         if problems:
             more = (f" ({len(problems) - 1} more: `tpvp session check {folder}` lists them)"
                     if len(problems) > 1 else "")
             raise InputFileError(problems[0].line(folder) + more)
+        return session
+
+    @classmethod
+    def _opened(cls, folder: Path) -> tuple["Session | None", list[Problem]]:
+        """``(the session, [])`` of a folder whose files are sound, or ``(None, its problems)``: what
+        only the session they make shows (a view session.json names that it has not; its view space
+        or previous model refused)."""
         state = json.loads((folder / STATE).read_text())
         previous = np.load(folder / "previous.npy", allow_pickle=False)
         organs = np.load(folder / ORGANS_FILE, allow_pickle=False) if (folder / ORGANS_FILE).is_file() else None
-        session = KINDS[state["kind"]](folder, load_config(folder / "config.yaml"), state, previous, organs)
+        try:
+            session = KINDS[state["kind"]](folder, load_config(folder / "config.yaml"), state, previous, organs)
+        except TpvpError as exc:
+            return None, [Problem(f"{folder}: the session cannot be opened: {exc}")]
         views = len(session.views()[0])
+        restore = f"restore {folder / STATE} from a backup"
         wrong = [c["view"] for c in session.captures if c["view"] >= views]
         if wrong:
-            raise InputFileError(f"{folder / STATE}: a capture of view {wrong[0]}, but this session's views are "
-                                 f"0..{views - 1} (edited by hand?): restore it from a backup")
-        return session
+            return None, [Problem(f"{folder / STATE}: a capture of view {wrong[0]}, but this session's views are "
+                                  f"0..{views - 1} (edited by hand?)", "restore it from a backup")]
+        plan = state.get("plan") or {}
+        wrong = [v for v in plan.get("planned_views", []) + plan.get("executed_views", []) if v >= views]
+        if wrong:
+            return None, [Problem(f"{folder / STATE}: the plan names view {wrong[0]}, but this session's views are "
+                                  f"0..{views - 1} (edited by hand?)", restore, repair=DROP_PLAN, drop_plan=True)]
+        predicted = prediction_views(folder) if plan and session.kind == "plant" else None
+        if predicted not in (None, views):  # a re-plan reads the rows of the views captured
+            return None, [Problem(f"{folder / PREDICTION_FILE} is damaged (it predicts what {predicted} views see, "
+                                  f"this session has {views})", repair=DROP_PLAN, drop_plan=True)]
+        return session, []
 
     def commit(self, state: dict, files: dict | None = None, write=None) -> None:
         """Write ``files`` (relative name -> bytes or text), what ``write(staging folder)`` writes

@@ -33,7 +33,7 @@ from tpvp.nbv.warm_up import start_nbv
 from tpvp.pipeline.plant import Known, plan, planning_surface, transfer
 from tpvp.pipeline.replan import Prediction, Replan, prediction_of, replan
 from tpvp.scene import voxels
-from tpvp.scene.organs import reduced_organs
+from tpvp.scene.organs import check_organ_targets, reduced_organs
 from tpvp.scene.simulator import planning_frame
 from tpvp.session.folder import KINDS, Request, Session
 
@@ -52,6 +52,10 @@ class PlantSession(Session):
         """``config`` as a real session runs it: the planning frame from the previous model, the
         plant at its true size (candidate views and sensor range in metres)."""
         return with_overrides(config, {"scene.frame": "previous", "scene.scale": "native"})
+
+    @classmethod
+    def check_organ_targets(cls, config: PlantConfig, organs, name: str) -> None:
+        check_organ_targets(config.selection.organ_target_values(), organs, name)
 
     def _scene(self, previous_scan) -> Known:
         config, name = self.config, self.state["previous_file"]
@@ -116,9 +120,10 @@ class PlantSession(Session):
         the scan frame) and returns the :class:`~tpvp.pipeline.plant.CaseResult` (its
         coverages are NaN: there is no ground truth). After captures of a plan's views, the rest
         is re-planned from them (the result's ``replans`` end with this one)."""
+        config = with_overrides(self.config, overrides or {})
+        self.check_organ_targets(config, self.previous_organs, self.state["previous_file"])  # before any work
         self.check_captured()
         from tpvp.pipeline.outputs import write_plan_outputs  # matplotlib, pandas: only a plan writes figures
-        config = with_overrides(self.config, overrides or {})
         last, captured, nbv = self.state.get("plan"), len(self.captures), self.nbv()
         predicted = self.folder / PREDICTION
         if last and captured > last.get("views_so_far", captured) and predicted.is_file():
