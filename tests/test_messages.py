@@ -483,13 +483,7 @@ def _(tmp, capsys):
 
 @row("export-not-rigid", 2, "tpvp export: error:", "base.json", "not a rigid transform")
 def _(tmp, capsys):
-    from tpvp.io.plan import plan_table, write_plan  # only this row writes a plan by hand
-    from tpvp.sensor.camera import look_at_rotations, rotation_to_quaternion
-
-    positions, look_ats = np.array([[0.4, 0, 0.2], [0, 0.4, 0.2]]), np.zeros((2, 3))
-    quaternions = [rotation_to_quaternion(r) for r in look_at_rotations(positions, look_ats)]
-    write_plan(tmp / "run", {"scan": plan_table(positions, look_ats, quaternions, ["initial", "planned"])},
-               {"scan": "the scans' frame"})
+    plan_folder(tmp)
     (tmp / "base.json").write_text(json.dumps(np.diag([2.0, 2.0, 2.0, 1.0]).tolist()))
     return run_cli(["export", "ros2", tmp / "run", "--base-from-scan", tmp / "base.json", "--output", tmp / "bag"],
                    capsys)

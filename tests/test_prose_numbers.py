@@ -720,14 +720,7 @@ ASKED = "0.98"  # the row of benchmarks/results/coverage_target_evaluate.md the 
 
 def _coverage_target_evaluate(space: str) -> dict:
     """The `all` row at target :data:`ASKED` of benchmarks/results/coverage_target_evaluate.md, by its header."""
-    lines = (ROOT / "benchmarks" / "results" / "coverage_target_evaluate.md").read_text().splitlines()
-    header = next(line for line in lines if line.startswith("| source | view_space | target |"))
-    names = [c.strip() for c in header.strip("|").split("|")]
-    for line in lines:
-        cells = [c.strip() for c in line.strip("|").split("|")]
-        if cells[:3] == ["all", space, ASKED]:
-            return dict(zip(names, cells))
-    raise AssertionError(f"no `all` row for {space} at {ASKED}")
+    return _evaluate_row("coverage_target_evaluate", space, ASKED)
 
 
 def _coverage_target_row() -> list[str]:
