@@ -35,3 +35,17 @@ def executed_notebooks(tmp_path_factory):
     (tests/test_notebooks.py). The runner gives their kernels an empty experiment cache and no
     published results, as on a fresh clone."""
     return tmp_path_factory.mktemp("notebooks") / "executed"
+
+
+def pytest_collection_modifyitems(items):
+    """The longest tests first, so that `make test`'s two workers finish together (pytest-xdist
+    hands tests out in this order): the notebooks, then the other `slow` tests, then the site,
+    which copies the notebooks' kept executions (run earlier, they need not be executed twice)."""
+    def rank(item):
+        if item.path.name == "test_site.py":
+            return 2
+        if item.path.name == "test_notebooks.py":
+            return 0
+        return 1 if item.get_closest_marker("slow") else 3
+
+    items.sort(key=rank)  # stable: each group keeps its collection order

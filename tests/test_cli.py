@@ -156,6 +156,7 @@ def test_demo_with_a_coverage_target_takes_fewer_views(tmp_path, capsys):
     assert "coverage_target: 0.95" in (tmp_path / "out" / "config.yaml").read_text()
 
 
+@pytest.mark.slow
 def test_demo_frontier_writes_the_table_and_figure(tmp_path, capsys):
     """--frontier adds the coverage-effort frontier of the case: one row per target, the plan's views
     never fewer for a higher target, the optimum never more views than the plan reaching the same

@@ -197,6 +197,7 @@ def test_cleaning_processed_models_again_is_harmless(tmp_path):
         assert row["points_cropped"] == row["points_raw"] == len(original)  # nothing outside the box
 
 
+@pytest.mark.slow
 def test_existing_dataset_needs_force_and_interrupted_rebuild_changes_nothing(raw, cleaned, tmp_path, monkeypatch):
     out = tmp_path / "dataset"
     source = raw.folder

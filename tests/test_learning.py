@@ -191,6 +191,7 @@ def test_incomplete_dataset_is_refused(tmp_path):
         ds.load_dataset(tmp_path)
 
 
+@pytest.mark.slow
 def test_training_two_epochs_lowers_the_loss(tiny_dataset):
     data, _ = tiny_dataset
     rows = data.split("train")

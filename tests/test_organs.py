@@ -183,6 +183,7 @@ def test_a_labelled_session_plans_the_organ_targets_as_the_simulator(labelled_sc
     assert planned.planning_organs["leaf"] >= 0.9 and planned.planning_organs["petiole"] >= 0.8
 
 
+@pytest.mark.slow
 def test_organ_targets_hold_through_re_planning(labelled_scene):
     scene, _, _ = labelled_scene
     config = make_config("plant", {"selection.organ_targets": "leaf=0.9", "selection.replan_after": 2})

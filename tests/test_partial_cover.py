@@ -27,6 +27,7 @@ def brute_fewest(a, required, executed=(), weights=None):
     return None
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("solver", SOLVERS)
 def test_partial_cover_equals_brute_force(solver):
     rng = np.random.default_rng(11)

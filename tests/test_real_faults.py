@@ -63,6 +63,7 @@ def test_the_recording_is_a_complete_rrd(tmp_path):
 
 # --- a full disk ---------------------------------------------------------------------------------
 
+@pytest.mark.slow
 @pytest.mark.parametrize("free", [0, 100_000, 1_000_000], ids=["tables", "figures", "recording"])
 def test_a_real_full_disk_ends_with_exit_4_and_the_next_run_publishes(tmpfs, free):
     tmpfs()  # skip here, not inside the try, where this machine cannot mount
@@ -82,6 +83,7 @@ def _limit_file_size(limit):
     return apply
 
 
+@pytest.mark.slow
 def test_a_file_size_limit_is_a_full_disk_too(tmp_path):
     """Where no tmpfs can be mounted: a limit of 100 kB per file fails the first figure's write."""
     out = tmp_path / "out"

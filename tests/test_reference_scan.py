@@ -66,6 +66,7 @@ def test_handheld_capture_walks_the_aisle_at_hand_heights():
         assert gaze.min() < capture.gaze[0] + step and gaze.max() > capture.gaze[1] - step
 
 
+@pytest.mark.slow
 def test_handheld_scan_ignores_the_candidates():
     room = room_config("room4")
     row = generate_row("room4", 0, 1, point_spacing=0.01).points

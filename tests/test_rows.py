@@ -105,6 +105,7 @@ def scene(tmp_path_factory):
     return greenhouse.build_row_scene(previous, current, QUICK, cache_dir=tmp_path_factory.mktemp("oracle"))
 
 
+@pytest.mark.slow
 def test_oracle_is_cached_on_disk_by_scene_and_configuration(scene, tmp_path):
     grid, viewpoints = scene.grid, scene.room.view_box.grid(QUICK.oracle_grid)
     ids, cached = cached_oracle(grid, viewpoints, ROW_RANGE, tmp_path)
@@ -208,6 +209,7 @@ def test_dataset_folder_without_sessions_is_one_clear_error(tmp_path, capsys):
 # ----------------------------------------------------------------------------- runner and CLI
 
 
+@pytest.mark.slow
 def test_row_experiments_cache_and_tables(tmp_path):
     config = rows.quick_config({"registration.method": "none", "protocol.cover_resolutions": (0.10,),
                                 "protocol.budgets": (50,), "protocol.repetitions": 2})
@@ -228,6 +230,7 @@ def test_row_experiments_cache_and_tables(tmp_path):
         rows.run_row_experiments([case], ["magic"], config)
 
 
+@pytest.mark.slow
 def test_standin_clean_then_tpvp_greenhouse_on_the_dataset(tmp_path, capsys):
     from data_tools.cli import main as data_main
 
@@ -249,6 +252,7 @@ def test_standin_clean_then_tpvp_greenhouse_on_the_dataset(tmp_path, capsys):
         assert (out / name).stat().st_size > 0
 
 
+@pytest.mark.slow
 def test_blockwise_nbv_and_pose_noise_rows(tmp_path):
     config = rows.quick_config({"registration.method": "none", "protocol.nbv_budgets": (10, 20)})
     assert config.pose_noise.draws == 1 and config.pose_noise.cover_resolution == 0.10

@@ -52,6 +52,7 @@ def brute_prior_missing(plant, prior, voxel) -> float:
     return counts[False] / len(keys)
 
 
+@pytest.mark.slow
 def test_a_season_equals_its_sessions_chained_by_hand(series):
     """run_season against the sessions chained here, with nothing of run_case or of the season's
     chaining: each day the simulator renders today's truth and executes the warm-up, the planner's
@@ -95,6 +96,7 @@ def test_a_season_equals_its_sessions_chained_by_hand(series):
     assert first.iloc[0].drop("arm").equals(first.iloc[1].drop("arm"))
 
 
+@pytest.mark.slow
 def test_the_arm_without_prior_is_the_geometric_nbv_until_the_target(series):
     from tpvp.config import with_overrides
     from tpvp.experiments.baselines import nbv_curve
@@ -128,6 +130,7 @@ def test_a_season_needs_two_scans_and_known_arms(series):
         run_season(series, CONFIG, arms=("oracle",))
 
 
+@pytest.mark.slow
 def test_the_season_command_writes_its_tables_and_figure_and_resumes(tmp_path, capsys):
     import pandas as pd
 
@@ -149,6 +152,7 @@ def test_the_season_command_writes_its_tables_and_figure_and_resumes(tmp_path, c
         pd.read_csv(tmp_path / "out" / "raw_cases.csv").drop(columns=["seconds_task"]))
 
 
+@pytest.mark.slow
 def test_a_row_season_chains_its_sessions_from_its_own_reconstruction(tmp_path):
     from tpvp.config import make_config
     from tpvp.experiments import season

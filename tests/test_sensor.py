@@ -124,6 +124,7 @@ def test_observe_many_equals_single_views():
                                       matrix)
 
 
+@pytest.mark.slow
 def test_reference_model_matches_bruteforce_on_real_tomato(tomato_scene):
     grid, views = tomato_scene
     for p in views[[0, 17, 8, 21]]:
@@ -131,6 +132,7 @@ def test_reference_model_matches_bruteforce_on_real_tomato(tomato_scene):
                                       bruteforce.reference_observation(grid, p, np.zeros(3)))
 
 
+@pytest.mark.slow
 def test_pixel_model_matches_bruteforce_on_real_tomato(tomato_scene):
     grid, views = tomato_scene
     config = SensorConfig(model="pixel", pixel_stride=3)

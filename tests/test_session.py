@@ -61,6 +61,7 @@ def test_the_session_plans_what_the_simulator_plans(tmp_path, pair, space, initi
     assert Session.open(tmp_path / "session").state["plan"]["planned_views"] == simulated.planned_views
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kind", ["cloud", "depth"])
 def test_a_row_session_plans_what_the_simulator_plans(tmp_path, kind):
     from tpvp.config import load_config
@@ -69,7 +70,9 @@ def test_a_row_session_plans_what_the_simulator_plans(tmp_path, kind):
 
     # A depth image of the simulator's voxel cubes gives surface points, not the row's points:
     # its passive reconstruction is the voxel centres (coarse = centres), on both sides.
-    config = load_config("paper-row", {**QUICK, "view_space": "room1",
+    # Two rounds of look-at targets (200 candidates, not 800): the pixel sensor's visibility of
+    # every candidate is most of this test's time, and the equivalence does not depend on their count.
+    config = load_config("paper-row", {**QUICK, "view_space": "room1", "targets.rounds": 2,
                                        **({"sensor.model": "pixel", "coarse": "centres"} if kind == "depth" else {})})
     previous, current = RowCase("room1", 0, 0).load()
     camera = RowStandInCamera(previous, current, config, cache_dir=tmp_path / "oracles")

@@ -279,6 +279,7 @@ def test_check_on_a_sound_folder(planned, capsys):
 
 # --- stop signals across a step --------------------------------------------------------------------
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kind", ["add", "plan"])
 def test_a_signal_at_the_commit_and_after_it_ends_with_the_step_complete(bench, tmp_path, kind):
     folder = tmp_path / "session"
@@ -293,6 +294,7 @@ def test_a_signal_at_the_commit_and_after_it_ends_with_the_step_complete(bench, 
     assert session_faults.signal_ok(result) == [] and result["rc"] == 130 and result["unchanged"], result
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kind", ["add", "plan"])
 def test_signals_at_random_moments_of_a_step_leave_status_line_and_folder_in_agreement(bench, tmp_path, kind):
     folder = tmp_path / "session"

@@ -88,6 +88,7 @@ def test_a_refresh_from_a_tree_with_changes_is_refused(monkeypatch):
         shipped.refresh(("table2",))
 
 
+@pytest.mark.slow
 def test_a_seeded_sample_of_quick_tasks_reproduces_the_shipped_rows(monkeypatch):
     reports = shipped.verify(("table1", "table1_learned"), sample=1, max_task_seconds=QUICK_TASK_S, progress=False)
     assert [r["protocol"] for r in reports] == ["table1", "table1_learned"]

@@ -47,6 +47,7 @@ def test_oracle_and_coverage_by_hand():
     assert np.isnan(coverage_ratio([1], []))
 
 
+@pytest.mark.slow
 def test_hemisphere_oracle_of_real_tomato(tomato_scene):
     grid, views = tomato_scene
     matrix = visibility_matrix(grid, views, np.zeros(3))
