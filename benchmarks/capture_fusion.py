@@ -29,7 +29,7 @@ import pandas as pd
 
 from data_tools.capture.formats import FORMATS, load_colour, load_depth, read_capture
 from data_tools.capture.fusion import fuse, fusion_config
-from data_tools.capture.standin import plant_scene, row_scene, write_standin
+from data_tools.capture.phone_standin import plant_scene, row_scene, write_standin
 from results_file import write_results
 from tpvp.io import read_point_cloud, write_point_cloud
 from tpvp.metrics.geometry import nearest_distances

@@ -94,7 +94,7 @@ def selection_on_prediction(scene, config, shared, surface, target: float, overr
     """``(views, true coverage, proven optimal)`` of the selection alone (no path) for planning
     target ``target`` applied to the planning ``surface`` as it is (``planning_miss_ratio = 1``),
     executed views included; ``overrides``: more configuration keys."""
-    from tpvp.experiments.single_plant import known
+    from tpvp.simulate.single_plant import known
     from tpvp.pipeline.plant import selection_problem
     from tpvp.setcover.methods import select_views
     from tpvp.visibility import coverage_ratio, covered_voxels
@@ -107,8 +107,8 @@ def selection_on_prediction(scene, config, shared, surface, target: float, overr
 
 
 def _calibrate_case(case, targets, overrides) -> list[dict]:
-    from tpvp.experiments.baselines import optimum
-    from tpvp.experiments.single_plant import build_scene, known, transfer
+    from tpvp.simulate.optimum import optimum
+    from tpvp.simulate.single_plant import build_scene, known, transfer
     from tpvp.pipeline.plant import planning_surface
     from tpvp.inflation.weights import surface_area, surface_classes
     from tpvp.pipeline.jit import compile_kernels
@@ -140,8 +140,8 @@ def _calibrate_case(case, targets, overrides) -> list[dict]:
 
 
 def _evaluate_case(case, targets, overrides) -> list[dict]:
-    from tpvp.experiments.frontier import coverage_frontier
-    from tpvp.experiments.single_plant import build_scene, transfer
+    from tpvp.simulate.frontier import coverage_frontier
+    from tpvp.simulate.single_plant import build_scene, transfer
     from tpvp.pipeline.jit import compile_kernels
     from tpvp.metrics import chamfer_distance
 

@@ -1,6 +1,7 @@
 """The import graph of tpvp/, read from the code (no import is executed): cycles between modules,
-upward imports (a foundation importing a stage, a stage package importing ``learning`` or
-``experiments``, ``learning`` importing ``experiments``), imports of tpvp modules inside
+upward imports (a foundation importing a stage, a stage package importing ``learning``, ``simulate`` or
+``experiments``, ``learning`` importing ``simulate`` or ``experiments``, the simulation importing the
+experiments or the command line), imports of tpvp modules inside
 functions, and private names (``_x``) imported from another package (by tpvp/ and benchmarks/).
 
 ``python benchmarks/import_graph.py`` prints the tables and a summary line; ``tests/test_layers.py``
@@ -20,7 +21,10 @@ DATA_TOOLS = ROOT.parent / "data_tools"  # above the library: it may load founda
 BENCHMARKS = Path(__file__).resolve().parent
 OWN = ("tpvp", "data_tools")
 TOP = ("cli", "cli_common", "commands", "__main__", "experiments", "session")  # may import anything below them
-ABOVE_STAGES = ("config", "pipeline", "learning", "experiments", "session", "cli", "cli_common", "commands", "__main__")
+ABOVE_STAGES = ("config", "pipeline", "learning", "simulate", "experiments", "session", "cli", "cli_common", "commands",
+                "__main__")
+#: What the simulation (``simulate``: above the planner and the sessions) never imports: what runs it.
+ABOVE_SIMULATE = ("learning", "experiments", "cli", "cli_common", "commands", "__main__")
 
 
 def module_name(path: Path) -> str:
@@ -69,14 +73,19 @@ def upward(source: str, target: str) -> bool:
     if target.startswith("data_tools"):
         return not source.startswith("data_tools")  # the library never loads the data tools
     if source.startswith("data_tools"):  # the layers that plan or run experiments are not theirs
-        return layer(target) in ("config", "pipeline", "learning", "experiments", "session", "cli", "cli_common", "commands")
+        return layer(target) in ("config", "pipeline", "learning", "simulate", "experiments", "session", "cli",
+                                 "cli_common", "commands")
     src, dst = layer(source), layer(target)
+    if dst == "export":  # a plan written for a robot or a tool: only what runs a plan asks for it
+        return src not in ("export", "commands", "cli", "__main__", "session")
     if src in FOUNDATIONS:
         return dst not in FOUNDATIONS
     if src in TOP:
         return False
     if src == "learning":
-        return dst in ("experiments", "cli", "commands", "__main__")
+        return dst in ("simulate", "experiments", "cli", "commands", "__main__")
+    if src == "simulate":
+        return dst in ABOVE_SIMULATE
     if src == "pipeline":  # above the stages and their configuration, below what runs it
         return dst in ABOVE_STAGES and dst not in ("config", "pipeline")
     return dst in ABOVE_STAGES

@@ -35,7 +35,7 @@ import torch
 
 from tpvp.config import make_config
 from tpvp.experiments import plants
-from tpvp.experiments.single_plant import build_scene, observation
+from tpvp.simulate.single_plant import build_scene, observation
 from tpvp.pipeline.jit import compile_kernels
 from tpvp.learning.planners import PcNbv, ma_scvp_selection
 from tpvp.nbv.methods import GeometricNbv, NbvContext

@@ -42,7 +42,7 @@ import pandas as pd
 
 from tpvp.config import make_config
 from tpvp.experiments import plants
-from tpvp.experiments.single_plant import build_scene
+from tpvp.simulate.single_plant import build_scene
 from tpvp.pipeline.jit import compile_kernels
 from tpvp.nbv import OccupancyMap, information_gain
 from tpvp.nbv.information_gain import next_best_view

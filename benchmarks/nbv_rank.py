@@ -11,10 +11,10 @@ Cases: the individual-plant protocol (:func:`tpvp.experiments.plants.case_list`)
 and maize pairs (``--seeds``, default 0 1 2) plus the bundled real pair, rotations 0 and 45 deg,
 initial views 17, 8 and 21, in the hemisphere (32 views) and sphere (63 views) view spaces; the
 paper configuration (``make_config("plant")``). Per case the scene is built
-(:func:`tpvp.experiments.single_plant.build_scene`), the initial view is executed (its ground-truth
+(:func:`tpvp.simulate.single_plant.build_scene`), the initial view is executed (its ground-truth
 observation integrated) and every NBV method (``--methods``, default ``geometric`` and ``prior``;
 names of :data:`tpvp.nbv.methods.NBV_METHODS`) picks the next view from the same
-:class:`~tpvp.nbv.methods.NbvContext` as :func:`~tpvp.experiments.single_plant.transfer` gives it
+:class:`~tpvp.nbv.methods.NbvContext` as :func:`~tpvp.simulate.single_plant.transfer` gives it
 (the previous session as ``prior``).
 
 Score: the TRUE added coverage of every non-executed candidate, the oracle voxels it sees in
@@ -48,7 +48,7 @@ import pandas as pd
 
 from tpvp.config import make_config
 from tpvp.experiments import plants
-from tpvp.experiments.single_plant import added_coverage, build_scene, rank_of
+from tpvp.simulate.single_plant import added_coverage, build_scene, rank_of
 from tpvp.pipeline.jit import compile_kernels
 from tpvp.nbv.methods import NBV_METHODS, NbvContext, make_nbv
 

@@ -126,10 +126,10 @@ CLI_TARGET_S = 8.0
 
 
 def bench_whole_plan(quick: bool = False) -> pd.DataFrame:
-    """Per-stage seconds of one plan (:func:`tpvp.experiments.single_plant.run_case`)."""
+    """Per-stage seconds of one plan (:func:`tpvp.simulate.single_plant.run_case`)."""
     from tpvp.config import make_config
     from tpvp.experiments import plants
-    from tpvp.experiments.single_plant import build_scene, run_case
+    from tpvp.simulate.single_plant import build_scene, run_case
     from tpvp.pipeline.jit import compile_kernels
 
     compile_kernels()

@@ -42,7 +42,7 @@ MARGIN = 0.001  # as benchmarks/coverage_target_calibration.py
 
 
 def _case_scene(case, overrides):
-    from tpvp.experiments.single_plant import build_scene, transfer
+    from tpvp.simulate.single_plant import build_scene, transfer
     from tpvp.pipeline.jit import compile_kernels
 
     compile_kernels()
@@ -52,8 +52,8 @@ def _case_scene(case, overrides):
 
 
 def _calibrate_case(case, ratios, replan_after) -> list[dict]:
-    from tpvp.experiments.baselines import optimum
-    from tpvp.experiments.single_plant import run_case
+    from tpvp.simulate.optimum import optimum
+    from tpvp.simulate.single_plant import run_case
 
     config, scene, shared = _case_scene(case, {"selection.coverage_target": ASKED,
                                                "selection.replan_after": replan_after})
@@ -69,8 +69,8 @@ def _calibrate_case(case, ratios, replan_after) -> list[dict]:
 
 
 def _evaluate_case(case, targets, replan_after) -> list[dict]:
-    from tpvp.experiments.baselines import optimum
-    from tpvp.experiments.single_plant import run_case
+    from tpvp.simulate.optimum import optimum
+    from tpvp.simulate.single_plant import run_case
 
     config, scene, shared = _case_scene(case, {})
     best = optimum(scene, config, targets=targets).set_index("target")

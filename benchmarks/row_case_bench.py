@@ -16,8 +16,8 @@ import time
 from dataclasses import replace
 
 from tpvp.config import make_config
-from tpvp.experiments import greenhouse
-from tpvp.experiments.rows import RowCase
+from tpvp.simulate import greenhouse
+from tpvp.simulate.row_cases import RowCase
 from tpvp.pipeline.jit import compile_kernels
 
 GOALS = {"oracle": 120.0, "registration": 10.0, "visibility@3cm": 30.0, "path": 5.0, "case@4cm": 180.0}

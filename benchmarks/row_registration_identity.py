@@ -21,8 +21,8 @@ from dataclasses import replace
 
 import numpy as np
 
-from tpvp.experiments.greenhouse import build_row_scene, run_row_case
-from tpvp.experiments.rows import RowCase, quick_config
+from tpvp.simulate.greenhouse import build_row_scene, run_row_case
+from tpvp.simulate.row_cases import RowCase, quick_config
 from tpvp.metrics.geometry import chamfer_distance
 from tpvp.scene import voxels
 

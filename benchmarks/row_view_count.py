@@ -30,9 +30,9 @@ import numpy as np
 import pandas as pd
 
 from tpvp.config import make_config
-from tpvp.experiments.greenhouse import build_row_scene, row_transfer
+from tpvp.simulate.greenhouse import build_row_scene, row_transfer
 from tpvp.pipeline.row import candidate_visibility
-from tpvp.experiments.rows import RowCase
+from tpvp.simulate.row_cases import RowCase
 from tpvp.io import atomic_write_text
 from tpvp.pipeline.jit import compile_kernels
 from tpvp.metrics.views import forced_views, views_per_voxel

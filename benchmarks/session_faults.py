@@ -53,7 +53,7 @@ def prepare(scratch: Path) -> dict[str, Path]:
     from tpvp.io import read_point_cloud, write_point_cloud
     from tpvp.scene.samples import load_sample
     from tpvp.session import Session
-    from tpvp.experiments.standin import StandInCamera
+    from tpvp.simulate.robot_camera import StandInCamera
 
     camera = StandInCamera(load_sample("tomato_0305"), load_sample("tomato_0306"), make_config("plant"))
     paths = {}

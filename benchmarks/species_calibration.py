@@ -96,8 +96,8 @@ def _features(scene, config, shared, surface) -> dict:
 def calibration_rows(case, targets=TARGETS, margins=MARGINS) -> list:
     """One case's rows (a task of :func:`tpvp.parallel.run_cases`): one per planning target, one per
     organ margin on a plant with fruit."""
-    from tpvp.experiments.baselines import optimum
-    from tpvp.experiments.single_plant import build_scene, known, run_case, transfer
+    from tpvp.simulate.optimum import optimum
+    from tpvp.simulate.single_plant import build_scene, known, run_case, transfer
     from tpvp.pipeline.jit import compile_kernels
     from tpvp.pipeline.plant import planning_surface
     from tpvp.scene.organs import CODE

@@ -87,7 +87,7 @@ def _greenhouse_clean(args) -> int:
 
 
 def _greenhouse_standin(args) -> int:
-    from data_tools.standin import write_processed_standin, write_raw_standin
+    from data_tools.greenhouse_standin import write_processed_standin, write_raw_standin
 
     if args.processed:
         folder = write_processed_standin(args.output, args.room, args.seed, args.sessions)
@@ -133,7 +133,7 @@ def _capture_fuse(args) -> int:
 
 
 def _capture_standin(args) -> int:
-    from data_tools.capture.standin import plant_scene, row_scene, write_standin
+    from data_tools.capture.phone_standin import plant_scene, row_scene, write_standin
 
     scene = (plant_scene(args.species, args.seed, args.size, args.frames) if args.scene == "plant"
              else row_scene(args.room, args.seed))

@@ -23,8 +23,8 @@ def tomato_scene(tomato_points):
 @pytest.fixture(scope="session")
 def raw_standin(tmp_path_factory):
     """Three generated room1 sessions written as raw captures with landmark files
-    (data_tools.standin); read-only for the tests that share it."""
-    from data_tools.standin import write_raw_standin
+    (data_tools.greenhouse_standin); read-only for the tests that share it."""
+    from data_tools.greenhouse_standin import write_raw_standin
 
     return write_raw_standin(tmp_path_factory.mktemp("raw_standin"), n_sessions=3)
 

@@ -269,7 +269,7 @@ def test_paired_figure_writes_a_png(tmp_path):
 
 @pytest.fixture(scope="module")
 def maize_case():
-    from tpvp.experiments.single_plant import build_scene
+    from tpvp.simulate.single_plant import build_scene
     from tpvp.synthetic.plants import generate_session_pair
 
     pair = generate_session_pair("maize", 2, days=2.0)

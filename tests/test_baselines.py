@@ -9,10 +9,11 @@ from scipy import sparse
 
 from tpvp.errors import ConfigError
 from tpvp.config import with_overrides
-from tpvp.experiments.baselines import NBV_COLUMNS, OPTIMUM_COLUMNS, break_tie, nbv_curve, optimum
+from tpvp.experiments.baselines import NBV_COLUMNS, break_tie, nbv_curve
 from tpvp.path.local import local_path_lengths, obstacle_radius
 from tpvp.setcover import SetCoverConfig
 from tpvp.setcover.maxcover import MaxCoverResult, max_coverage
+from tpvp.simulate.optimum import OPTIMUM_COLUMNS, optimum
 from tpvp.solvers import SOLVERS
 from tpvp.visibility import coverage_ratio, covered_voxels
 
@@ -107,7 +108,7 @@ def test_max_coverage_trivial_and_bad_input():
 @pytest.fixture(scope="module")
 def small_case():
     from tpvp.config import make_config
-    from tpvp.experiments.single_plant import build_scene
+    from tpvp.simulate.single_plant import build_scene
     from tpvp.synthetic.plants import generate_session_pair
 
     config = make_config("plant", {"view_space": "tammes:10", "initial_view": 0,
@@ -207,7 +208,7 @@ def test_gmc_gain_after_four_views_on_the_bundled_tomato():
     from tpvp.config import make_config
     from tpvp.experiments import plants
     from tpvp.experiments.baselines import gmc_nbv_config
-    from tpvp.experiments.single_plant import observation
+    from tpvp.simulate.single_plant import observation
     from tpvp.nbv.methods import NbvContext, make_nbv
 
     case = plants.case_list([plants.bundled_instance()], view_spaces=("sphere",), rotations=(0.0,),
@@ -264,8 +265,6 @@ def test_optimum(small_case):
 
 
 def test_the_frontier_optimum_in_one_model_equals_each_target_alone(small_case):
-    from tpvp.experiments.baselines import optimum
-
     scene, config = small_case
     targets = (1.0, 0.8, 0.95, 0.9, 0.99)
     alone = optimum(scene, config, targets=targets)
@@ -278,8 +277,8 @@ def test_the_frontier_optimum_in_one_model_equals_each_target_alone(small_case):
 
 
 def test_coverage_frontier(small_case, tmp_path):
-    from tpvp.experiments.frontier import FRONTIER_COLUMNS, coverage_frontier, write_frontier
-    from tpvp.experiments.single_plant import run_case
+    from tpvp.simulate.frontier import FRONTIER_COLUMNS, coverage_frontier, write_frontier
+    from tpvp.simulate.single_plant import run_case
     from tpvp.viz.experiments import plot_frontier
 
     scene, config = small_case

@@ -16,12 +16,12 @@ import pytest
 from data_tools import cli
 from data_tools.capture.formats import FORMATS, check_frame_name, depth_intrinsics, read_capture
 from data_tools.capture.fusion import depth_bounds, frame_depths, frames_needed, fuse, fusion_config, supported
-from data_tools.capture.standin import plant_scene, write_standin
+from data_tools.capture.phone_standin import plant_scene, write_standin
 from data_tools.errors import ConfigError, InputFileError, PointCloudError
+from tpvp.export.images import frame_names
 from tpvp.io import read_point_cloud
 from tpvp.metrics.geometry import chamfer_distance
 from tpvp.sensor.camera import Intrinsics, switch_camera_axes
-from tpvp.sensor.reconstruction import frame_names
 
 FRAMES = 48
 

@@ -17,7 +17,7 @@ from data_tools.alignment import (
     transform_points,
 )
 from data_tools.errors import ConfigError, InputFileError, PointCloudError
-from data_tools.standin import session_offset
+from data_tools.greenhouse_standin import session_offset
 from tpvp.io import read_point_cloud
 from tpvp.scene.boxes import room_config
 

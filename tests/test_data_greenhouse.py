@@ -1,7 +1,7 @@
 """Greenhouse dataset tools: session discovery, cleaning, alignment to day one, Kaggle download.
 
 The real dataset cannot be downloaded here; the generated rows of tpvp.synthetic.greenhouse, written in
-the dataset's layouts by data_tools.standin (processed models, and raw captures with static
+the dataset's layouts by data_tools.greenhouse_standin (processed models, and raw captures with static
 greenhouse structure, outliers, known rigid offsets and landmark files), go through the same path.
 """
 
@@ -21,7 +21,7 @@ from data_tools.cleaning import clean_scan, find_support_planes, fragment_mask
 from data_tools.errors import CredentialsError, DatasetError, InputFileError, PointCloudError
 from data_tools.greenhouse import MANIFEST_COLUMNS, clean_greenhouse, find_sessions, parse_date
 from data_tools.kaggle_download import download_greenhouse, find_kaggle_credentials
-from data_tools.standin import static_structure, write_processed_standin, write_raw_standin
+from data_tools.greenhouse_standin import static_structure, write_processed_standin, write_raw_standin
 from tpvp.errors import ConfigError
 from helpers import tree_digest
 from tpvp.io import read_point_cloud, write_point_cloud

@@ -17,8 +17,8 @@ from rosbags.typesys import Stores, get_typestore
 
 from helpers import benchmark_module, tree_digest
 from tpvp.cli import main
-from tpvp.io.plan import plan_table, write_plan
-from tpvp.pipeline.robot import quaternion_to_rotation
+from tpvp.export.poses import quaternion_to_rotation
+from tpvp.io.plan import plan_table, read_plan, write_plan
 from tpvp.sensor.camera import D435, look_at_rotations, project, rotation_to_quaternion, switch_camera_axes
 from tpvp.session import Session
 
@@ -362,8 +362,6 @@ def test_a_plan_that_is_not_one_is_one_line_naming_line_and_column(plan_folder, 
 
 def test_a_plan_edited_by_hand_reads_as_pandas_reads_it(plan_folder):
     """Comments after values, blank lines and quaternions rounded to 3 decimals are a plan still."""
-    from tpvp.pipeline.robot import read_plan
-
     lines = (plan_folder / "plan.csv").read_text().splitlines()
     values = lines[2].split(",")
     values[8:] = [f"{float(v):.3f}" for v in values[8:]]

@@ -412,7 +412,7 @@ def _(tmp, capsys):
 @row("capture-depth-units", 2, "data_tools capture fuse: error:", "1000000.png: frame 1000000's depth lies",
      "read at 1 m per unit", "all 12 frames do: are the units wrong? try --depth-scale 0.001")
 def _(tmp, capsys):
-    from data_tools.capture.standin import plant_scene, write_standin  # only these rows render a capture
+    from data_tools.capture.phone_standin import plant_scene, write_standin  # only these rows render a capture
 
     folder = write_standin(tmp / "phone", "polycam", plant_scene("tomato", 0, size=0.4, frames=12), progress=False)
     return run_cli(["capture", "fuse", folder, "--output", tmp / "cloud.ply", "--depth-scale", "1"], capsys,

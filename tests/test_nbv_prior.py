@@ -130,7 +130,7 @@ def test_camera_inside_the_prior_is_left_out():
 
 def test_run_case_with_prior_nbv():
     """The pipeline with nbv.method=prior: transfer() hands the previous session to the method."""
-    from tpvp.experiments.single_plant import build_scene, run_case
+    from tpvp.simulate.single_plant import build_scene, run_case
     from tpvp.synthetic.plants import generate_session_pair
 
     pair = generate_session_pair("maize", 2, days=2.0)

@@ -16,7 +16,7 @@ from scipy import sparse
 from tpvp.cli import main
 from tpvp.config import make_config
 from tpvp.errors import ConfigError
-from tpvp.experiments.single_plant import build_scene, run_case
+from tpvp.simulate.single_plant import build_scene, run_case
 from tpvp.io import write_point_cloud
 from tpvp.scene import voxels
 from tpvp.scene.organs import CODE, ORGANS, organ_codes, part_organ_codes, voxel_organs
@@ -50,7 +50,7 @@ def test_voxel_organs_are_the_majority_of_their_points():
 def test_the_true_organ_coverage_of_a_scene_built_by_hand():
     """Eight 1 cm voxels in a row, their labelled points and what three views see, all written out:
     the true coverage per organ of each set of views is known by hand."""
-    from tpvp.experiments.single_plant import organ_coverage
+    from tpvp.simulate.single_plant import organ_coverage
     from tpvp.scene.grid import build_grid
     from tpvp.scene.simulator import Scene
     from tpvp.visibility import covered_voxels, oracle_voxels
@@ -168,7 +168,7 @@ def test_plan_reads_labels_and_reports_coverage_per_organ(labelled_scene, tmp_pa
 def test_a_labelled_session_plans_the_organ_targets_as_the_simulator(labelled_scene, tmp_path):
     """A real session started with the previous model's organ labels plans per-organ targets from
     its captures exactly as the simulator does."""
-    from tpvp.experiments.standin import StandInCamera
+    from tpvp.simulate.robot_camera import StandInCamera
     from tpvp.session import Session
 
     _, pair, organs = labelled_scene

@@ -103,7 +103,7 @@ def test_plot_depth_images(tmp_path):
 
 @pytest.mark.parametrize("view_space,has_table", [("sphere", False), ("hemisphere", True)])
 def test_render_demo_table_only_for_hemisphere(tmp_path, view_space, has_table):
-    from tpvp.experiments.render_demo import RenderDemoConfig, run_render_demo
+    from tpvp.simulate.render_demo import RenderDemoConfig, run_render_demo
 
     # Depth images only for one of the two (each figure costs about a second).
     out = tmp_path / view_space if has_table else None
@@ -124,7 +124,7 @@ def test_render_demo_table_only_for_hemisphere(tmp_path, view_space, has_table):
 
 
 def test_render_demo_explicit_table_and_no_output():
-    from tpvp.experiments.render_demo import RenderDemoConfig
+    from tpvp.simulate.render_demo import RenderDemoConfig
 
     assert RenderDemoConfig().uses_table
     assert not RenderDemoConfig(view_space="sphere").uses_table
@@ -133,7 +133,7 @@ def test_render_demo_explicit_table_and_no_output():
 
 
 def test_render_depth_images(tmp_path, tomato_scene):
-    from tpvp.experiments.render_demo import default_depth_views, render_depth_images
+    from tpvp.simulate.render_demo import default_depth_views, render_depth_images
     from tpvp.sensor.sensor import SensorConfig
 
     grid, views = tomato_scene

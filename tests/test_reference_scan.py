@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from tpvp.errors import ConfigError
-from tpvp.experiments.rows import RowCase, default_row_cases
+from tpvp.simulate.row_cases import RowCase, default_row_cases
 from tpvp.scene import voxels
 from tpvp.scene.boxes import room_config
 from tpvp.scene.grid import build_grid

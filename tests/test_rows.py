@@ -14,11 +14,12 @@ import pytest
 
 from tpvp.cli import main
 from tpvp.errors import ConfigError, InputFileError, PointCloudError
-from tpvp.experiments import greenhouse, rows
+from tpvp.experiments import rows
 from tpvp.experiments.results import write_results
 from tpvp.config import make_config
 from tpvp.scene.boxes import ROOMS, candidate_look_ats, room_config
 from tpvp.sensor.sensor import ROW_RANGE
+from tpvp.simulate import greenhouse, row_cases
 from tpvp.synthetic.greenhouse import generate_row
 from tpvp.viewspace import get_view_space
 from tpvp.viewspace.lookat import (farthest_point_sampling, free_space_keys, round_robin_views,
@@ -26,7 +27,7 @@ from tpvp.viewspace.lookat import (farthest_point_sampling, free_space_keys, rou
 from tpvp.viewspace.priors import AUTHORS_PRIORS, LOOK_AT_PRIORS
 from tpvp.visibility.oracle_cache import cached_oracle
 
-QUICK = rows.quick_config({"registration.method": "none"})
+QUICK = row_cases.quick_config({"registration.method": "none"})
 
 
 # ----------------------------------------------------------------------------- look-at candidates
@@ -191,14 +192,14 @@ def test_each_room_is_defined_once_and_its_view_space_made_from_it():
 
 def test_empty_passive_scan_is_one_clear_error():
     points = generate_row("room1", 0, 0, point_spacing=0.02).points
-    blind = rows.quick_config({"sensor.max_range": 0.05, "registration.method": "none"})
+    blind = row_cases.quick_config({"sensor.max_range": 0.05, "registration.method": "none"})
     with pytest.raises(PointCloudError, match="empty passive scan"):
         greenhouse.build_row_scene(points, points, blind, cache_dir=False)
 
 
 def test_dataset_folder_without_sessions_is_one_clear_error(tmp_path, capsys):
     with pytest.raises(InputFileError, match="no Processed_3D_Model"):
-        rows.dataset_cases(tmp_path)
+        row_cases.dataset_cases(tmp_path)
     (tmp_path / "Processed_3D_Model").mkdir()
     (tmp_path / "Processed_3D_Model" / "room1_20250915.pcd").write_bytes(b"")
     assert main(["greenhouse", "--dataset", str(tmp_path), "--output", str(tmp_path / "out")]) == 2
@@ -211,9 +212,9 @@ def test_dataset_folder_without_sessions_is_one_clear_error(tmp_path, capsys):
 
 @pytest.mark.slow
 def test_row_experiments_cache_and_tables(tmp_path):
-    config = rows.quick_config({"registration.method": "none", "protocol.cover_resolutions": (0.10,),
+    config = row_cases.quick_config({"registration.method": "none", "protocol.cover_resolutions": (0.10,),
                                 "protocol.budgets": (50,), "protocol.repetitions": 2})
-    case = rows.RowCase("room1", 0, point_spacing=0.008)
+    case = row_cases.RowCase("room1", 0, point_spacing=0.008)
     methods = ["coarse", "ours", "prior-obb-random", "upper-limit"]
     raw = rows.run_row_experiments([case], methods, config, cache_dir=tmp_path / "cache", progress=False)
     assert sorted(raw["method"].unique()) == sorted(methods)
@@ -254,9 +255,9 @@ def test_standin_clean_then_tpvp_greenhouse_on_the_dataset(tmp_path, capsys):
 
 @pytest.mark.slow
 def test_blockwise_nbv_and_pose_noise_rows(tmp_path):
-    config = rows.quick_config({"registration.method": "none", "protocol.nbv_budgets": (10, 20)})
+    config = row_cases.quick_config({"registration.method": "none", "protocol.nbv_budgets": (10, 20)})
     assert config.pose_noise.draws == 1 and config.pose_noise.cover_resolution == 0.10
-    case = rows.RowCase("room1", 0, point_spacing=0.008)
+    case = row_cases.RowCase("room1", 0, point_spacing=0.008)
     raw = rows.run_row_experiments([case], ["blockwise-nbv", "pose-noise"], config, progress=False)
     nbv = raw[(raw["method"] == "blockwise-nbv") & raw["prefix_of"].isna()]
     assert nbv["views"].tolist() == [10, 20]

@@ -156,7 +156,7 @@ def test_the_season_command_writes_its_tables_and_figure_and_resumes(tmp_path, c
 def test_a_row_season_chains_its_sessions_from_its_own_reconstruction(tmp_path):
     from tpvp.config import make_config
     from tpvp.experiments import season
-    from tpvp.experiments.rows import QUICK
+    from tpvp.simulate.row_cases import QUICK
     from tpvp.pipeline.row import plan as plan_row
     from tpvp.visibility import safe_visibility
 

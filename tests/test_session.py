@@ -12,14 +12,14 @@ import pytest
 from helpers import tree_digest
 from tpvp.cli import main
 from tpvp.config import make_config
-from tpvp.experiments.single_plant import run_case
+from tpvp.simulate.single_plant import run_case
 from tpvp.io import faults, write_point_cloud
 from tpvp.scene import voxels
 from tpvp.scene.samples import load_sample, sample_path
 from tpvp.scene.simulator import observation
 from tpvp.sensor.camera import D435
 from tpvp.session import Session
-from tpvp.experiments.standin import RowStandInCamera, StandInCamera
+from tpvp.simulate.robot_camera import RowStandInCamera, StandInCamera
 
 CASES = [(space, initial) for space in ("hemisphere", "sphere") for initial in (17, 8, 21)]
 
@@ -65,8 +65,8 @@ def test_the_session_plans_what_the_simulator_plans(tmp_path, pair, space, initi
 @pytest.mark.parametrize("kind", ["cloud", "depth"])
 def test_a_row_session_plans_what_the_simulator_plans(tmp_path, kind):
     from tpvp.config import load_config
-    from tpvp.experiments.greenhouse import run_row_case
-    from tpvp.experiments.rows import QUICK, RowCase
+    from tpvp.simulate.greenhouse import run_row_case
+    from tpvp.simulate.row_cases import QUICK, RowCase
 
     # A depth image of the simulator's voxel cubes gives surface points, not the row's points:
     # its passive reconstruction is the voxel centres (coarse = centres), on both sides.
@@ -245,7 +245,7 @@ def test_a_plan_csv_row_is_a_pose_file(tmp_path):
 
 
 def test_a_row_session_from_the_command_line(tmp_path, capsys):
-    from tpvp.experiments.rows import RowCase
+    from tpvp.simulate.row_cases import RowCase
 
     previous = tmp_path / "row.ply"
     write_point_cloud(previous, RowCase("room1", 0, 0).load()[0])

@@ -3,7 +3,7 @@
 import pytest
 
 from tpvp.config import make_config
-from tpvp.experiments.single_plant import build_scene, run_case
+from tpvp.simulate.single_plant import build_scene, run_case
 from tpvp.synthetic.plants import generate_session_pair
 
 

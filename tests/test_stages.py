@@ -8,8 +8,8 @@ import pytest
 
 from tpvp.config import CALIBRATED_MISS_RATIO, make_config
 from tpvp.errors import ConfigError, InputFileError
-from tpvp.experiments.outputs import write_case_outputs
-from tpvp.experiments.single_plant import build_scene, run_case
+from tpvp.simulate.outputs import write_case_outputs
+from tpvp.simulate.single_plant import build_scene, run_case
 from tpvp.nbv.methods import NBV_METHODS, NbvChoice
 from tpvp.registration.methods import REGISTRATION_METHODS, Alignment
 from tpvp.scene.normalise import up_rotation

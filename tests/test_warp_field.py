@@ -82,8 +82,8 @@ def test_identity_input_stays_put_after_one_iteration(row):
 def unchanged_row():
     """A generated room1 row that did not change between sessions: P = its full cloud, Q = what the
     15 passive views see of it (~half of the row), as the greenhouse experiments build them."""
-    from tpvp.experiments.greenhouse import build_row_scene
-    from tpvp.experiments.rows import quick_config
+    from tpvp.simulate.greenhouse import build_row_scene
+    from tpvp.simulate.row_cases import quick_config
 
     config = quick_config({"view_space": "room1"})
     points = generate_row("room1", 0, 1, point_spacing=0.008).points

@@ -1,3 +1,3 @@
 """A phone's capture into a session's cloud: read the capture's frames (:mod:`.formats`), fuse their
 depth (:mod:`.fusion`); and a stand-in phone that writes such captures of generated plants and rows
-(:mod:`.standin`)."""
+(:mod:`.phone_standin`)."""

@@ -13,6 +13,7 @@ from tpvp.experiments import rows as row_experiments
 from tpvp.experiments import season
 from tpvp.experiments.results import markdown, write_results
 from tpvp.scene.boxes import ROOMS
+from tpvp.simulate.row_cases import default_row_cases
 
 
 def _experiments_plants(args) -> int:
@@ -31,8 +32,7 @@ def _experiments_plants(args) -> int:
 
 def _experiments_rows(args) -> int:
     config = row_config(args)
-    cases = row_experiments.default_row_cases(args.quick, args.dataset, tuple(args.rooms),
-                                              references=args.reference or ["handheld"])
+    cases = default_row_cases(args.quick, args.dataset, tuple(args.rooms), references=args.reference or ["handheld"])
     methods = args.methods or list(row_experiments.ALL_METHODS)
     where = f"the Dask cluster {args.scheduler}" if args.scheduler else f"{args.workers} local worker(s)"
     print(f"{len(cases)} cases x {len(methods)} methods on {where}; cache {args.cache}")

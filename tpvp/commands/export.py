@@ -9,11 +9,15 @@ import numpy as np
 
 from tpvp.config import load_config
 from tpvp.errors import ConfigError, InputFileError
+from tpvp.export.colmap import write_colmap
+from tpvp.export.images import IMAGES, image_files
+from tpvp.export.moveit import moveit_goals
+from tpvp.export.nerfstudio import PLY_NAME, write_nerfstudio
+from tpvp.export.poses import plan_poses, read_transform
+from tpvp.export.ros2 import SCAN_FRAME, TOPICS, check_frame, stamp_nanoseconds, write_plan_bag
 from tpvp.io import atomic_write_text
+from tpvp.io.plan import plan_file, read_plan
 from tpvp.io.publish import staged_file, staged_folder
-from tpvp.sensor.reconstruction import IMAGES, PLY_NAME, image_files, write_colmap, write_nerfstudio
-from tpvp.pipeline.robot import moveit_goals, plan_file, plan_poses, read_plan, read_transform
-from tpvp.pipeline.rosbag import SCAN_FRAME, TOPICS, check_frame, stamp_nanoseconds, write_plan_bag
 from tpvp.sensor.camera import D435
 from tpvp.session import Session, read_intrinsics
 from tpvp.session.check import STATE

@@ -6,10 +6,7 @@ import json
 from pathlib import Path
 
 from tpvp.cli_common import case_options, print_rows, print_warnings, resolved_config
-from tpvp.experiments.frontier import coverage_frontier, write_frontier_files
 from tpvp.errors import InputFileError
-from tpvp.experiments.outputs import write_case_outputs
-from tpvp.experiments.single_plant import build_scene, run_case, transfer
 from tpvp.io import read_point_cloud
 from tpvp.io.publish import staged_folder
 from tpvp.io.units import plant_size_warning
@@ -17,6 +14,9 @@ from tpvp.pipeline.jit import compile_kernels, plant_pieces
 from tpvp.scene.normalise import check_session_pair
 from tpvp.scene.organs import LABEL_KINDS, check_organ_targets, organ_codes
 from tpvp.scene.samples import load_sample
+from tpvp.simulate.frontier import coverage_frontier, write_frontier_files
+from tpvp.simulate.outputs import write_case_outputs
+from tpvp.simulate.single_plant import build_scene, run_case, transfer
 from tpvp.viz.background import drawing_pool
 
 STAGES = ["compile", "scene", "warm-up NBV", "registration", "inflation", "visibility", "view selection",

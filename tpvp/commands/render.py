@@ -5,9 +5,9 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from tpvp.experiments.render_demo import RenderDemoConfig, run_render_demo
 from tpvp.io import atomic_write_text
 from tpvp.io.publish import staged_folder
+from tpvp.simulate.render_demo import RenderDemoConfig, run_render_demo
 
 
 def _render(args) -> int:

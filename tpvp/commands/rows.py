@@ -8,11 +8,11 @@ from pathlib import Path
 from tpvp.cli_common import configuration_options, print_rows, print_warnings
 from tpvp.config import load_config, parse_overrides
 from tpvp.errors import TpvpError
-from tpvp.experiments.greenhouse import build_row_scene, run_row_case
-from tpvp.experiments.outputs import write_row_case_outputs
-from tpvp.experiments.rows import QUICK, RowCase, dataset_cases
 from tpvp.io.publish import staged_folder
 from tpvp.scene.boxes import ROOMS
+from tpvp.simulate.greenhouse import build_row_scene, run_row_case
+from tpvp.simulate.outputs import write_row_case_outputs
+from tpvp.simulate.row_cases import QUICK, RowCase, dataset_cases
 from tpvp.synthetic.scan import REFERENCES
 from tpvp.viz.background import drawing_pool
 

@@ -21,7 +21,7 @@ from scipy import sparse
 from tpvp.config import with_overrides
 from tpvp.experiments.plants import default_cases, method_config
 from tpvp.experiments.results import mean_std
-from tpvp.experiments.single_plant import known, run_case, transfer
+from tpvp.simulate.single_plant import known, run_case, transfer
 from tpvp.pipeline.surface import planning_visibility
 from tpvp.inflation.inflate import SURFACE_LAYERS as ORIGINS
 from tpvp.metrics.geometry import chamfer_distance, nearest_distances
@@ -224,7 +224,7 @@ class RegistrationSetting:
     inflation."""
     label: str
     warm_up_views: int
-    transfer: object  # tpvp.experiments.single_plant.Transfer
+    transfer: object  # tpvp.simulate.single_plant.Transfer
     error: np.ndarray  # (N,) nearest distance of each warped point to today's plant
     chamfer_truth: float  # symmetric Chamfer distance of the warped model to today's plant (m, Table IV)
     plans: dict  # "with inflation" / "without inflation" -> CaseResult

@@ -1,7 +1,7 @@
 """The paper's comparison figure: one case, the same initial view, GMC, MA-SCVP, Ours and the exact
 optimum at a matched view count (Ours' count: its initial view and warm-up NBV included).
 
-* **Ours**: :func:`tpvp.experiments.single_plant.run_case`;
+* **Ours**: :func:`tpvp.simulate.single_plant.run_case`;
 * **GMC**: the sequential NBV curve (:func:`tpvp.experiments.baselines.nbv_curve`) stopped at the
   same number of views, moves in execution order with the obstacle radius known at each move;
 * **MA-SCVP**: the learned one-shot view set after one PC-NBV view
@@ -25,7 +25,7 @@ from scipy import sparse
 
 from tpvp.config import PlantConfig, with_overrides
 from tpvp.experiments.baselines import nbv_curve
-from tpvp.experiments.single_plant import Scene, run_case
+from tpvp.simulate.single_plant import Scene, run_case
 from tpvp.learning.methods import learned_one_shot
 from tpvp.learning.dataset import VIEWS as LEARNED_VIEWS
 from tpvp.path.local import local_path_lengths, local_path_points, obstacle_radius

@@ -22,12 +22,11 @@ from scipy import sparse
 
 from tpvp.config import PlantConfig, make_config, with_overrides
 from tpvp.errors import ConfigError, InputFileError
-from tpvp.experiments.baselines import nbv_curve, optimum
+from tpvp.experiments.baselines import nbv_curve
 from tpvp.experiments.comparison import write_comparison_files
 from tpvp.experiments import runner
 from tpvp.experiments.results import mean_std
 from tpvp.experiments.runner import Experiment, shared
-from tpvp.experiments.single_plant import added_coverage, build_scene, rank_of, run_case, transfer
 from tpvp.io import read_point_cloud
 from tpvp.learning.dataset import VIEWS
 from tpvp.learning.methods import learned_one_shot
@@ -36,6 +35,8 @@ from tpvp.registry import Registry
 from tpvp.scene.organs import LABEL_KINDS, ORGANS, organ_codes, part_organ_codes
 from tpvp.scene.samples import load_sample
 from tpvp.setcover.partial import partial_set_cover
+from tpvp.simulate.optimum import optimum
+from tpvp.simulate.single_plant import added_coverage, build_scene, rank_of, run_case, transfer
 from tpvp.synthetic.plants import generate_session_pair
 from tpvp.visibility import covered_voxels
 from tpvp.viz.experiments import plot_coverage_effort, plot_species_bars

@@ -1,7 +1,8 @@
 """The greenhouse-row experiments of the paper (Tables V-VI): cases x methods, cached, in parallel.
 
-A *case* is one consecutive session pair of one row (default: generated rows of room1 and room4,
-five sessions each, 4 pairs per row = 8 cases; or the real rows of a cleaned dataset folder). A
+A *case* is one consecutive session pair of one row (:class:`tpvp.simulate.row_cases.RowCase`;
+default: generated rows of room1 and room4, five sessions each, 4 pairs per row = 8 cases; or the
+real rows of a cleaned dataset folder). A
 *method* is a named entry of :data:`ROW_METHODS`, ``method(scene, config) -> rows``, that turns a
 case's scene into result rows; what it sweeps (covering voxels, budgets, repetitions) is in the one
 :class:`tpvp.config.RowConfig` (``protocol``, ``pose_noise``, ``blockwise``). The runner, the cache
@@ -10,134 +11,36 @@ and the parallel execution are those of the plant experiments (:mod:`tpvp.experi
 
 from __future__ import annotations
 
-import json
-import re
 import time
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-from tpvp.config import RowConfig, config_yaml, make_config
-from tpvp.errors import InputFileError
+from tpvp.config import RowConfig, make_config
 from tpvp.experiments import runner
-from tpvp.experiments.greenhouse import (build_row_scene, candidate_truth, random_selection, row_candidates,
-                                         row_coverage, row_transfer, run_row_case, upper_limit)
 from tpvp.experiments.results import mean_std
 from tpvp.experiments.pose_noise import passive_map, pose_noise_study, summarise
 from tpvp.experiments.runner import Experiment, shared
-from tpvp.io import atomic_write_text, read_point_cloud
-from tpvp.io.publish import staged_folder
 from tpvp.nbv.blockwise import blockwise_nbv
-from tpvp.provenance import provenance
 from tpvp.registry import Registry
-from tpvp.scene.boxes import ROOMS, room_config
-from tpvp.synthetic.greenhouse import DATES, generate_row_sessions
-from tpvp.synthetic.scan import REFERENCES, reference_points
+from tpvp.simulate.greenhouse import (build_row_scene, candidate_truth, random_selection, row_candidates, row_coverage,
+                                      row_transfer, run_row_case, upper_limit)
+from tpvp.simulate.row_cases import RowCase
+from tpvp.synthetic.scan import REFERENCES
 from tpvp.viewspace.lookat import PRIORS
 from tpvp.viewspace.priors import AUTHORS_PRIORS
 from tpvp.visibility import coverage_ratio
 from tpvp.viz.rows import plot_blockwise_prefix, plot_row_frontier
 
-SESSIONS = 5
 PREFIX_STEP = 10  # views between the points of Block-wise NBV's prefix curve
-# --quick: a 2 cm ground truth (the oracle grid and the inflation voxels follow their rules: 0.2 m,
-# 2 cm), two covering voxels, fewer budgets and draws.
-QUICK = {"gt_resolution": 0.02, "protocol.cover_resolutions": (0.10, 0.05), "protocol.budgets": (100, 300),
-         "protocol.repetitions": 2, "protocol.nbv_budgets": (50, 100), "pose_noise.draws": 1,
-         "pose_noise.cover_resolution": 0.10, "pose_noise.levels": ((0.0, 0.0), (0.01, 2.0))}
 PAPER_TABLE = Path(__file__).resolve().parent.parent / "data" / "paper" / "greenhouse_rows.csv"
 PAPER_POSE_NOISE = PAPER_TABLE.with_name("pose_noise.csv")
 PAPER_TIMING = PAPER_TABLE.with_name("row_timing.csv")
-SESSION_FILE = re.compile(r"^(?P<room>room\d+)_(?P<date>20\d{6})\.(pcd|ply)$")
 
 ROW_METHODS = Registry("row experiment method")
-
-
-@dataclass(frozen=True)
-class RowCase:
-    """Sessions ``previous`` -> ``previous + 1`` of a row: generated (``seed``) or files of a
-    cleaned dataset (``files``)."""
-
-    room: str
-    previous: int
-    seed: int = 0
-    files: tuple = ()  # (previous file, current file) of a dataset; empty for a generated row
-    point_spacing: float = 0.004
-    reference: str = "handheld"  # what of a generated row the reference holds (tpvp.synthetic.scan.REFERENCES)
-
-    @property
-    def source(self) -> str:
-        return "dataset" if self.files else "generated"
-
-    @property
-    def name(self) -> str:
-        if self.files:
-            return f"{Path(self.files[0]).stem} -> {Path(self.files[1]).stem}"
-        return f"{self.room} seed {self.seed} sessions {self.previous}->{self.previous + 1}"
-
-    def labels(self) -> dict:
-        return {"source": self.source, "reference": "dataset" if self.files else self.reference, "room": self.room,
-                "case": self.name, "previous_session": self.previous}
-
-    def config(self, base: RowConfig) -> RowConfig:
-        """``base`` in this case's room."""
-        return replace(base, view_space=self.room)
-
-    @property
-    def date(self) -> str | None:
-        """YYYYMMDD of the current session (a generated session k stands for the dataset's k-th date)."""
-        if self.files:
-            match = SESSION_FILE.match(Path(self.files[1]).name)
-            return match["date"] if match else None
-        return DATES[self.previous + 1]
-
-    def load(self) -> tuple[np.ndarray, np.ndarray]:
-        if self.files:
-            return tuple(read_point_cloud(Path(f), units="m") for f in self.files)
-        sessions = generate_row_sessions(self.room, self.seed, self.previous + 2, self.point_spacing)
-        room = room_config(self.room)
-        return tuple(reference_points(sessions[k].points, room, self.reference)
-                     for k in (self.previous, self.previous + 1))
-
-
-def dataset_cases(folder, rooms=ROOMS) -> list[RowCase]:
-    """Consecutive session pairs of every room in a dataset written by ``python -m data_tools
-    greenhouse clean`` (``Processed_3D_Model/<room>_<YYYYMMDD>.pcd``)."""
-    folder = Path(folder)
-    models = folder / "Processed_3D_Model"
-    if not models.is_dir():
-        raise InputFileError(f"{folder}: no Processed_3D_Model/ folder - write one with "
-                             f"'python -m data_tools greenhouse clean SOURCE --output {folder}'")
-    sessions = {}
-    for path in sorted(models.iterdir()):
-        match = SESSION_FILE.match(path.name)
-        if match and match["room"] in rooms:
-            sessions.setdefault(match["room"], []).append(path)
-    cases = [RowCase(room, i, files=(str(a), str(b))) for room, paths in sorted(sessions.items())
-             for i, (a, b) in enumerate(zip(paths[:-1], paths[1:]))]
-    if not cases:
-        raise InputFileError(f"{models}: no two sessions of one room (files <room>_<YYYYMMDD>.pcd of "
-                             f"{', '.join(rooms)}): nothing to pair")
-    return cases
-
-
-def default_row_cases(quick: bool = False, dataset=None, rooms=ROOMS, seed: int = 0,
-                      references=("handheld",)) -> list[RowCase]:
-    """The paper's 8 cases (4 consecutive pairs of each room) per reference of a generated row
-    (``references``; a dataset's rows are used as they are), or the first pair of each in quick mode."""
-    if dataset is not None:
-        cases = dataset_cases(dataset, rooms)
-        return cases[:1] if quick else cases
-    pairs = [(room, k) for room in rooms for k in range(SESSIONS - 1)][:1 if quick else None]
-    return [RowCase(room, k, seed, reference=reference) for reference in references for room, k in pairs]
-
-
-def quick_config(overrides: dict | None = None) -> RowConfig:
-    """A coarse configuration for CI and quick notebooks (:data:`QUICK`), then ``overrides``."""
-    return make_config("row", QUICK | dict(overrides or {}))
 
 
 # --------------------------------------------------------------------------------------------------

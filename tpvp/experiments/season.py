@@ -25,10 +25,10 @@ from tpvp.experiments import runner
 from tpvp.experiments.results import mean_std
 from tpvp.experiments.runner import Experiment
 from tpvp.experiments.baselines import nbv_curve
-from tpvp.experiments.greenhouse import build_row_scene, execute, observed_points, run_row_case
+from tpvp.simulate.greenhouse import build_row_scene, execute, observed_points, run_row_case
 from tpvp.experiments.plants import dataset_table
 from tpvp.io import read_point_cloud
-from tpvp.experiments.single_plant import build_scene, run_case
+from tpvp.simulate.single_plant import build_scene, run_case
 from tpvp.metrics import chamfer_distance
 from tpvp.nbv.blockwise import blockwise_nbv
 from tpvp.registry import Registry

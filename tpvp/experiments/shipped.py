@@ -35,6 +35,7 @@ from tpvp.experiments.runner import cached_experiments, experiment_cache
 from tpvp.io import atomic_write_bytes, atomic_write_text
 from tpvp.parallel import run_cases
 from tpvp.provenance import code_digest, tree_state
+from tpvp.simulate import row_cases
 
 ROOT = Path(__file__).resolve().parent.parent.parent
 SHIPPED = ROOT / "tpvp" / "data" / "results"
@@ -63,7 +64,7 @@ class Protocol:
             return season.row_season_cases()
         if self.setting == "species":
             return species.species_cases(species.helios_dataset())
-        cases = rows.default_row_cases(quick=False, references=self.references)
+        cases = row_cases.default_row_cases(quick=False, references=self.references)
         return cases[:1] if self.first_case_only else cases
 
     def run(self, cache_dir, progress: bool = True, cases=None, methods=None, workers=None) -> pd.DataFrame:

@@ -19,8 +19,8 @@ import pandas as pd
 from tpvp.config import make_config
 from tpvp.errors import ConfigError
 from tpvp.experiments import plants
-from tpvp.experiments.baselines import optimum
-from tpvp.experiments.single_plant import build_scene, run_case, transfer
+from tpvp.simulate.optimum import optimum
+from tpvp.simulate.single_plant import build_scene, run_case, transfer
 from tpvp.pipeline.jit import compile_kernels
 from tpvp.scene.organs import CODE
 from tpvp.metrics.views import (  # noqa: F401 (the notebook's statistics, used here too)
@@ -39,7 +39,7 @@ class Showcase:
 
     case: object  # tpvp.experiments.plants.Case
     config: object  # PlantConfig of the case
-    scene: object  # tpvp.experiments.single_plant.Scene
+    scene: object  # tpvp.simulate.single_plant.Scene
     result: object  # tpvp.pipeline.plant.CaseResult
 
     @property
@@ -64,7 +64,7 @@ def plan_row(item: Showcase, with_optimum: bool = True) -> dict:
     """One row about a showcase plan: species, view space, what Ours did (views, of them planned,
     coverage after the warm-up and at the end in percent, path length), the occlusion summary and,
     with ``optimum``, the fewest views that see 100 % of the oracle set with perfect knowledge of
-    today's plant (same initial view; ``tpvp.experiments.baselines.optimum``)."""
+    today's plant (same initial view; ``tpvp.simulate.optimum.optimum``)."""
     result = item.result
     row = {"species": item.case.instance.species, "view_space": item.case.view_space,
            "ours_views": result.n_views, "ours_planned_views": len(result.planned_views),

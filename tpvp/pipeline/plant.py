@@ -6,7 +6,7 @@ state: the initial view and the warm-up NBVs). From that: registration of the pr
 the coarse reconstruction -> inflation -> visibility of the planning surface (ray casting) -> view
 selection -> open TSP around the obstacle sphere. Every stage's method is chosen by name in the
 configuration (:class:`tpvp.config.PlantConfig`). The simulator's ground truth is not here: the
-simulation (:mod:`tpvp.experiments.single_plant`) executes the warm-up and the plan on it, a real
+simulation (:mod:`tpvp.simulate.single_plant`) executes the warm-up and the plan on it, a real
 session (:mod:`tpvp.session.plant`) captures them.
 """
 

@@ -9,7 +9,7 @@ model again onto all the captures, inflates and casts rays again, drops the pred
 the executed views should have seen and did not (the captures contradict them), and selects the
 fewest further views for the planning target with the executed views fixed. The remaining plan is
 kept when it still reaches the target and the new selection is not smaller; otherwise the new
-views are ordered from the current pose. The simulation (:mod:`tpvp.experiments.single_plant`)
+views are ordered from the current pose. The simulation (:mod:`tpvp.simulate.single_plant`)
 and a real session (:mod:`tpvp.session.plant`) call the same function with the same captures.
 """
 

@@ -6,7 +6,7 @@ each point, and the sensor. From that: registration of the previous session onto
 inflation -> PriorTransfer look-at targets and their candidate 6D views (round robin) ->
 visibility on the planning surface -> set cover with the passive views as executed -> route
 from the end of the sweep. The simulator's ground truth is not here: the simulation
-(:mod:`tpvp.experiments.greenhouse`) captures the sweep and executes the plan on it, a real
+(:mod:`tpvp.simulate.greenhouse`) captures the sweep and executes the plan on it, a real
 session (:mod:`tpvp.session.row`) captures them.
 """
 

@@ -30,9 +30,9 @@ from tpvp import __version__
 from tpvp.config import flatten_keys, load_config, to_dict
 from tpvp.errors import InputFileError, TpvpError
 from tpvp.io import atomic_write_text
+from tpvp.io.plan import PlanFileError, read_plan_values
 from tpvp.io.publish import staged_folder
 from tpvp.pipeline.replan import Prediction, Replan
-from tpvp.pipeline.robot import PlanFileError, read_plan_values
 from tpvp.scene.organs import ORGANS
 from tpvp.scene.voxels import KEY_OFFSET
 

@@ -5,7 +5,7 @@ as the datasets' rows are aligned) asks for the 15 passive-sweep views in order;
 capture; ``plan`` runs the row pipeline on what was captured (warp-field registration, voxel
 inflation, the transfer look-at prior's candidates, set cover at the covering voxel with the
 passive views as executed, band path from the end of the sweep) and asks for the planned views.
-With the same captures the plan equals the simulator's (:func:`tpvp.experiments.greenhouse.run_row_case`):
+With the same captures the plan equals the simulator's (:func:`tpvp.simulate.greenhouse.run_row_case`):
 both run :func:`tpvp.pipeline.row.plan`.
 """
 

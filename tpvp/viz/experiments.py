@@ -122,7 +122,7 @@ def plot_method_comparison(path, scene, plans, title: str = ""):
 
 
 def plot_frontier(path, frontier: pd.DataFrame, title: str = ""):
-    """The coverage-effort frontier of one case (``tpvp.experiments.frontier.coverage_frontier``):
+    """The coverage-effort frontier of one case (``tpvp.simulate.frontier.coverage_frontier``):
     true coverage vs views and vs path length for each planning target (labelled), beside the
     exact optimum for the same target with perfect knowledge."""
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))

@@ -15,7 +15,7 @@ import numpy as np
 
 from tpvp.scene.simulator import build_scene, observation, scan_points
 from tpvp.sensor.sensor import depth_image
-from tpvp.experiments.greenhouse import build_row_scene, observed_points
+from tpvp.simulate.greenhouse import build_row_scene, observed_points
 from tpvp.session.plant import PlantSession
 from tpvp.visibility import safe_visibility
 

@@ -16,8 +16,8 @@ import pandas as pd
 
 from tpvp.config import PlantConfig, with_overrides
 from tpvp.errors import ConfigError
-from tpvp.experiments.baselines import optimum
-from tpvp.experiments.single_plant import Scene, known, run_case, transfer
+from tpvp.simulate.optimum import optimum
+from tpvp.simulate.single_plant import Scene, known, run_case, transfer
 from tpvp.pipeline.plant import planning_surface
 from tpvp.io import atomic_write_text
 from tpvp.io.publish import staged_folder

@@ -6,8 +6,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from tpvp.experiments import single_plant
-from tpvp.experiments.greenhouse import execute
+from tpvp.simulate import single_plant
+from tpvp.simulate.greenhouse import execute
 from tpvp.pipeline.outputs import Measured, write_plan_outputs, write_row_plan_outputs
 from tpvp.viz.geometry import plan_geometry
 from tpvp.viz.interactive import scene_3d

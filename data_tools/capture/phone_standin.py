@@ -27,12 +27,13 @@ import numpy as np
 
 from data_tools.capture.formats import ARKIT_TO_Z_UP
 from data_tools.errors import ConfigError
+from tpvp.export.images import frame_names
+from tpvp.export.nerfstudio import nerfstudio_transforms
 from tpvp.io import atomic_write_bytes, atomic_write_text, write_point_cloud
 from tpvp.io.publish import staged_folder
 from tpvp.scene import voxels
 from tpvp.scene.grid import build_grid
 from tpvp.sensor.camera import PIXEL_CENTRE, Intrinsics, look_at_rotation, switch_camera_axes
-from tpvp.sensor.reconstruction import frame_names, nerfstudio_transforms
 from tpvp.sensor.sensor import SensorConfig, depth_image
 from tpvp.synthetic.scan import PHONE_LIDAR
 

@@ -5,7 +5,7 @@ the camera's pose at every view, in execution order), ``/tpvp/route`` (``nav_msg
 same poses as ``PoseStamped``, the route the camera takes) and ``/tf_static`` (``tf2_msgs/msg/TFMessage``
 with one transform from the robot's frame to the plan's own frame, :data:`SCAN_FRAME`). The poses
 are the plan moved into the robot's frame by the base-from-scan transform
-(:func:`tpvp.pipeline.robot.moved_plan`); their orientations turn OpenCV camera axes (x right,
+(:func:`tpvp.export.poses.moved_plan`); their orientations turn OpenCV camera axes (x right,
 y down, z forward) into that frame, as in ``plan.csv``.
 
 The bag is rosbag2 format version 8, the newest Humble's rosbag2 reads (Iron and Jazzy read it too;
@@ -26,7 +26,7 @@ from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
 from tpvp.errors import ConfigError
-from tpvp.pipeline.robot import moved_plan
+from tpvp.export.poses import moved_plan
 from tpvp.sensor.camera import rotation_to_quaternion
 
 #: The child frame of the static transform: the plan's own frame (the scans' / the session's world).
