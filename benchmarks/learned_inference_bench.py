@@ -35,7 +35,7 @@ import torch
 
 from tpvp.config import make_config
 from tpvp.experiments import plants
-from tpvp.simulate.single_plant import build_scene, observation
+from tpvp.simulate.single_plant import build_scene
 from tpvp.pipeline.jit import compile_kernels
 from tpvp.learning.planners import PcNbv, ma_scvp_selection
 from tpvp.nbv.methods import GeometricNbv, NbvContext
@@ -46,7 +46,7 @@ def _method(kind, scene, config, executed):
     context = NbvContext(scene.view_space, np.zeros(3), scene.sensor, config.nbv)
     method = GeometricNbv(context) if kind == "geometric" else PcNbv(context)
     for view in executed:
-        method.integrate(view, observation(scene, view))
+        method.integrate(view, scene.observe(view))
     return method
 
 

@@ -208,7 +208,6 @@ def test_gmc_gain_after_four_views_on_the_bundled_tomato():
     from tpvp.config import make_config
     from tpvp.experiments import plants
     from tpvp.experiments.baselines import gmc_nbv_config
-    from tpvp.simulate.single_plant import observation
     from tpvp.nbv.methods import NbvContext, make_nbv
 
     case = plants.case_list([plants.bundled_instance()], view_spaces=("sphere",), rotations=(0.0,),
@@ -223,7 +222,7 @@ def test_gmc_gain_after_four_views_on_the_bundled_tomato():
         space = scene.view_space
         nbv = make_nbv(NbvContext(space, np.zeros(3), scene.sensor, nbv_config, prior=scene.previous))
         for view in executed:
-            nbv.integrate(view, observation(scene, view))
+            nbv.integrate(view, scene.observe(view))
         scores = nbv.next_view().scores
         return np.delete(scores, executed)
 

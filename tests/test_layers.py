@@ -106,12 +106,12 @@ def test_the_data_tools_import_neither_the_planner_nor_the_experiments(report):
 
 
 #: Modules that hold or make the simulator's ground truth.
-TRUTH = ("tpvp.scene.simulator", "tpvp.simulate", "tpvp.experiments", "tpvp.synthetic", "tpvp.visibility.oracle_cache")
+TRUTH = ("tpvp.simulate", "tpvp.experiments", "tpvp.synthetic", "tpvp.visibility.oracle_cache")
 #: The one way a planner still loads them (found by issue 47, left for the library to fix): a learned
 #: method (``nbv.method = pc-nbv``, ``selection.method = ma-scvp``) runs from tpvp.learning.planners,
 #: which also holds the simulation's MA-SCVP baseline (``oracle_selection`` reads the truth,
-#: ``learned_one_shot`` renders a warm-up) and imports tpvp.nbv.warm_up and tpvp.learning.dataset,
-#: which import tpvp.scene.simulator and tpvp.synthetic.plants. Only this edge is left out of the
+#: ``learned_one_shot`` runs a warm-up on the scene it is given) and imports tpvp.learning.dataset,
+#: which imports tpvp.synthetic.plants (the training plants). Only this edge is left out of the
 #: check below; ``test_a_learned_method_loads_no_simulator`` fails until it is gone.
 KNOWN_LEAK = ("tpvp.learning.methods", "tpvp.learning.planners")
 
@@ -160,10 +160,28 @@ def test_the_planner_cannot_reach_the_ground_truth(report, loads):
 
 
 @pytest.mark.xfail(strict=True, reason="issue 47 finding: tpvp.learning.planners (the learned methods' module, "
-                   "loaded by the planner through the plugin tpvp.learning.methods) imports tpvp.nbv.warm_up "
-                   "and tpvp.learning.dataset, which import tpvp.scene.simulator and tpvp.synthetic.plants")
+                   "loaded by the planner through the plugin tpvp.learning.methods) imports tpvp.learning.dataset, "
+                   "which imports tpvp.synthetic.plants")
 def test_a_learned_method_loads_no_simulator(loads):
     assert chain(loads, "tpvp.pipeline.plant", TRUTH) == []
+
+
+def test_a_real_session_reaches_no_simulator(report, loads):
+    """A real session plans on what the robot knows, never on a simulation: nothing a ``tpvp.session``
+    module loads (at the top, in a function, through a plugin or a ``"module:attribute"`` reference,
+    directly or not) is under the simulation (``tpvp.simulate``: the simulated world, the stand-in
+    cameras), the experiments or any other holder of the truth (``TRUTH``). It shares the planning
+    frame and the reduction of the previous scan with the simulator through ``tpvp.scene.frame``
+    (``planning_frame``, ``known_from_previous``). The one edge left out is the planner's known leak
+    (``KNOWN_LEAK``: the registries' plugin tpvp.learning.methods loads the learned planners, which
+    load the synthetic training plants; ``test_a_learned_method_loads_no_simulator``)."""
+    sessions = [module for module in report.graph if module.startswith("tpvp.session")]
+    assert {"tpvp.session", "tpvp.session.cli", "tpvp.session.plant", "tpvp.session.row"} <= set(sessions)
+    for module in sorted(sessions):
+        path = chain(loads, module, TRUTH, without={KNOWN_LEAK})
+        assert path == [], " -> ".join(path)
+    # the walk does follow the plugin edges: through the leak the truth is reached
+    assert chain(loads, "tpvp.session.plant", TRUTH) != []
 
 
 def test_no_product_command_reaches_the_experiments(report, loads):
@@ -192,12 +210,12 @@ def test_the_exports_load_no_planner_session_or_simulation(report, import_graph)
     """``tpvp.export`` writes a plan for MoveIt, ROS 2, nerfstudio and COLMAP from the plan's files:
     it imports no planner, session, configuration or simulation, and no stage imports it. Static
     imports only: through ``tpvp.registry``'s plugin edge every module reaches the learned methods,
-    which load the simulator today (the strict xfail above)."""
+    which load the synthetic training plants today (the strict xfail above)."""
     exports = [module for module in report.graph if module.startswith("tpvp.export")]
     assert {"tpvp.export.moveit", "tpvp.export.ros2", "tpvp.export.nerfstudio", "tpvp.export.colmap"} <= set(exports)
     for module in exports:
-        path = chain(report.graph, module, ["tpvp.pipeline", "tpvp.session", "tpvp.config", "tpvp.simulate",
-                                     "tpvp.experiments", "tpvp.scene.simulator"])
+        path = chain(report.graph, module,
+                     ["tpvp.pipeline", "tpvp.session", "tpvp.config", "tpvp.simulate", "tpvp.experiments"])
         assert path == [], " -> ".join(path)
     assert import_graph.upward("tpvp.sensor.camera", "tpvp.export.ros2")  # a stage asking for an export
 

@@ -397,6 +397,30 @@ def _(tmp, capsys):
                    capsys)
 
 
+@row("option-for-other-setting", 2, "tpvp config: error: --scale applies to individual plants",
+     "configuration 'paper-row' plans greenhouse rows")
+def _(tmp, capsys):
+    return run_cli(["config", "--config", "paper-row", "--scale", "native"], capsys)
+
+
+@row("organ-targets-on-rows", 2, "tpvp greenhouse: error: configuration: selection.organ_targets='fruit=1.0': "
+     "organ targets need a plant's organ labels; a row has none")
+def _(tmp, capsys):
+    return run_cli(["greenhouse", "--set", "selection.organ_targets=fruit=1.0", "--output", tmp / "out"], capsys)
+
+
+@row("season-key-per-case", 2, "tpvp experiments: error: selection.replan_after=1 (--config or --set): the season "
+     "sets it per case from --replan-after")
+def _(tmp, capsys):
+    return run_cli(["experiments", "season", "--set", "selection.replan_after=1", "--output", tmp / "out"], capsys)
+
+
+@row("season-option-other-season", 2, "tpvp experiments: error: --view-spaces applies to the plants' season",
+     "--rows runs the greenhouse rows' season")
+def _(tmp, capsys):
+    return run_cli(["experiments", "season", "--rows", "--view-spaces", "sphere", "--output", tmp / "out"], capsys)
+
+
 # --------------------------------------------------------------------------------------------------
 # phone captures, exports, organs and Helios (data_tools capture / helios, tpvp export, --organ-targets)
 

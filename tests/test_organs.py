@@ -52,7 +52,7 @@ def test_the_true_organ_coverage_of_a_scene_built_by_hand():
     the true coverage per organ of each set of views is known by hand."""
     from tpvp.simulate.single_plant import organ_coverage
     from tpvp.scene.grid import build_grid
-    from tpvp.scene.simulator import Scene
+    from tpvp.simulate.world import Scene
     from tpvp.visibility import covered_voxels, oracle_voxels
 
     stem, leaf, petiole, unknown = CODE["stem"], CODE["leaf"], CODE["petiole"], CODE["unknown"]

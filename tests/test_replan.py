@@ -14,7 +14,7 @@ from tpvp.config import load_config, make_config, with_overrides
 from tpvp.errors import ConfigError
 from tpvp.simulate.single_plant import build_scene, known, run_case, transfer
 from tpvp.simulate.robot_camera import StandInCamera
-from tpvp.nbv.warm_up import start_nbv
+from tpvp.nbv.methods import start_nbv
 from tpvp.pipeline.plant import plan, planning_surface
 from tpvp.pipeline.replan import AGREEMENT_VOXELS, Prediction, disagreement, prediction_of, replan
 from tpvp.scene import voxels

@@ -14,7 +14,7 @@ from tpvp.errors import ConfigError
 from tpvp.experiments.season import SEASON_COLUMNS, prior_missing, run_season
 from tpvp.nbv.warm_up import warm_up
 from tpvp.pipeline.plant import Known, plan, transfer
-from tpvp.scene.simulator import build_scene
+from tpvp.simulate.world import build_scene
 from tpvp.synthetic.plants import generate_growth_series, generate_plant
 
 CONFIG = load_config("paper", {"selection.coverage_target": 0.98})

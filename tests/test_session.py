@@ -16,7 +16,6 @@ from tpvp.simulate.single_plant import run_case
 from tpvp.io import faults, write_point_cloud
 from tpvp.scene import voxels
 from tpvp.scene.samples import load_sample, sample_path
-from tpvp.scene.simulator import observation
 from tpvp.sensor.camera import D435
 from tpvp.session import Session
 from tpvp.simulate.robot_camera import RowStandInCamera, StandInCamera
@@ -104,7 +103,7 @@ def test_the_exported_model_is_the_simulators_fused_model(tmp_path, pair):
     from tpvp.io import read_point_cloud
 
     exported = voxels.voxelise(session.scene.to_planning(read_point_cloud(path, units="m")), config.gt_resolution)
-    fused = voxels.voxelise(np.concatenate([observation(camera.scene, v) for v in views]), config.gt_resolution)
+    fused = voxels.voxelise(np.concatenate([camera.scene.observe(v) for v in views]), config.gt_resolution)
     assert np.array_equal(exported, fused)
 
 

@@ -54,11 +54,11 @@ MUTATIONS = (
              ("tests/test_layers.py::test_a_plan_made_with_the_truth_sealed_is_the_simulation_s_plan",),
              ("tests/test_layers.py::test_the_planner_cannot_reach_the_ground_truth",)),
     Mutation("layers-plugin-loads-simulator",
-             "the learned methods' plugin module (loaded by the planner's registries) imports the simulator's "
-             "warm-up, and with it tpvp.scene.simulator",
+             "the learned methods' plugin module (loaded by the planner's registries) imports the simulated "
+             "world, tpvp.simulate.world",
              "tpvp/learning/methods.py",
              "from tpvp.nbv.methods import NBV_METHODS, NbvContext\n",
-             "from tpvp.nbv.methods import NBV_METHODS, NbvContext\nfrom tpvp.nbv.warm_up import warm_up  # noqa: F401\n",
+             "from tpvp.nbv.methods import NBV_METHODS, NbvContext\nfrom tpvp.simulate.world import Scene  # noqa: F401\n",
              ("tests/test_layers.py::test_the_planner_cannot_reach_the_ground_truth",),
              ("tests/test_layers.py::test_the_planner_cannot_reach_the_ground_truth",)),
     Mutation("organs-countable-not-oracle",

@@ -1,5 +1,10 @@
 """What the command lines share: the configuration options and their resolution, one-line warnings.
 
+:data:`OPTIONS` is the one table from a command-line option to its configuration key: every
+command declares its configuration options from it (:func:`add_config_options`) and turns them
+into overrides with :func:`config_overrides`; an option given to a setting it does not apply to is
+refused with one line (:func:`check_options_apply`), never ignored.
+
 A light module (no experiment is imported), so that ``tpvp session`` loads only what it runs.
 """
 
@@ -7,9 +12,12 @@ from __future__ import annotations
 
 import argparse
 import sys
+from dataclasses import dataclass
+from typing import Callable
 
 from tpvp.config import SCALES, UP_AXES, load_config, parse_overrides
-from tpvp.errors import TpvpError
+from tpvp.errors import ConfigError, TpvpError
+from tpvp.scene.boxes import ROOMS
 from tpvp.viewspace import get_view_space, view_space_choices
 
 # One rule for plants and rows (selection.coverage_target, SelectionConfig.planning_target).
@@ -32,22 +40,122 @@ def print_rows(rows, folder, files: str) -> None:
     print(f"wrote {folder}/ ({files})")
 
 
-def resolved_config(args):
-    """The resolved configuration: --config, then the dedicated options, then --set overrides."""
-    overrides = {}
-    initial = getattr(args, "initial_view", None)
-    if initial is not None and initial.lstrip("-").isdigit():
-        initial = int(initial)
-    for key, value in (("view_space", getattr(args, "view_space", None)), ("initial_view", initial),
-                       ("scene.scale", getattr(args, "scale", None)), ("scene.radius", getattr(args, "radius", None)),
-                       ("scene.up_axis", getattr(args, "up_axis", None)),
-                       ("selection.coverage_target", getattr(args, "coverage_target", None)),
-                       ("selection.replan_after", getattr(args, "replan_after", None)),
-                       ("selection.organ_targets", getattr(args, "organ_targets", None))):
-        if value is not None:
-            overrides[key] = value
-    overrides.update(parse_overrides(args.set))
-    config = load_config(args.config, overrides)
+REPLAN_AFTER_HELP = ("re-plan the rest of the plan from the captures after every K planned views "
+                     "(selection.replan_after; 0: plan once, the paper's; default: the configuration's, 0)")
+ORGAN_TARGETS_HELP = ("the share of each organ's predicted planning voxels the plan must see, e.g. "
+                      "fruit=1.0,leaf=0.95 (organs: unknown, stem, leaf, petiole, peduncle, flower, fruit; the "
+                      "others keep --coverage-target's share); needs labelled scans (--labels) "
+                      "(selection.organ_targets)")
+#: What each setting plans, in the refusal of an option that does not apply to it.
+SETTING_WORDS = {"plant": "individual plants", "row": "greenhouse rows"}
+
+
+def _index_or_name(value: str):
+    """``--initial-view``: an index (``17``) or a view's name (``near_horizontal``)."""
+    return int(value) if value.lstrip("-").isdigit() else value
+
+
+def view_space_arg(value: str) -> str:
+    try:
+        get_view_space(value)  # one clear error line for an unknown name or a bad file
+    except TpvpError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return value
+
+
+@dataclass(frozen=True)
+class ConfigOption:
+    """One command-line option that sets one configuration key (a row of :data:`OPTIONS`).
+
+    ``settings``: the settings whose plans use the key (``plant``, ``row``); given to another, the
+    option is refused. ``help``: the text, or a function giving it (computed when the option is
+    declared). ``default``: None (the configuration's value stands unless the option is given), or
+    a value set like a given one (``--room``)."""
+
+    flag: str
+    key: str
+    settings: tuple[str, ...]
+    help: str | Callable[[], str]
+    type: Callable | None = None
+    metavar: str | None = None
+    choices: tuple | None = None
+    default: object = None
+
+    @property
+    def dest(self) -> str:
+        return self.flag.lstrip("-").replace("-", "_")
+
+    def add_to(self, p, nargs=None, dest=None, default=None, help=None) -> None:
+        """Declare the option on parser ``p``; ``nargs``/``dest``/``default``/``help``: a sweep's
+        (several values, one run each: ``tpvp experiments season --replan-after 0 1``)."""
+        extra = {"nargs": nargs, "dest": dest} if nargs else {}
+        p.add_argument(self.flag, default=self.default if default is None else default, type=self.type,
+                       metavar=self.metavar, choices=self.choices,
+                       help=help or (self.help() if callable(self.help) else self.help), **extra)
+
+
+#: Option -> configuration key: every command's configuration options, declared once.
+OPTIONS = (
+    ConfigOption("--coverage-target", "selection.coverage_target", ("plant", "row"), COVERAGE_TARGET_HELP,
+                 float, "FRACTION"),
+    ConfigOption("--replan-after", "selection.replan_after", ("plant",), REPLAN_AFTER_HELP, int, "K"),
+    ConfigOption("--organ-targets", "selection.organ_targets", ("plant",), ORGAN_TARGETS_HELP,
+                 metavar="ORGAN=SHARE,..."),
+    ConfigOption("--view-space", "view_space", ("plant", "row"),
+                 lambda: f"candidate views: {view_space_choices()} (default: the configuration's, hemisphere)",
+                 view_space_arg, "SPACE"),
+    ConfigOption("--initial-view", "initial_view", ("plant",),
+                 "initial view: an index or near_horizontal (17), oblique (8), near_top (21) "
+                 "(default: the configuration's, 17)", _index_or_name, "INDEX|NAME"),
+    ConfigOption("--scale", "scene.scale", ("plant",),
+                 "normalised: the paper's protocol, plant scaled to a 0.24 m largest side; native: plan "
+                 "at the plant's true size with --radius (default: normalised)", choices=SCALES),
+    ConfigOption("--radius", "scene.radius", ("plant",),
+                 "view-sphere radius in metres (native: around the real plant, default 0.4; "
+                 "normalised: default the view space's 0.4)", float, "M"),
+    ConfigOption("--up-axis", "scene.up_axis", ("plant",),
+                 "the scan axis that points up; the plant is turned so that it becomes +Z (default: +z)",
+                 choices=UP_AXES),
+    ConfigOption("--cover-resolution", "selection.cover_resolution", ("plant", "row"),
+                 "covering voxel of the set cover (paper: 0.10, 0.05, 0.04, 0.03; default: the "
+                 "configuration's, 0.04)", float, "M"),
+    ConfigOption("--room", "view_space", ("row",), "(default: %(default)s)", choices=ROOMS, default=ROOMS[0]),
+)
+OPTION = {option.flag: option for option in OPTIONS}
+
+
+def add_config_options(p, *flags: str) -> None:
+    """Declare the options ``flags`` of :data:`OPTIONS` on parser ``p``, in that order."""
+    for flag in flags:
+        OPTION[flag].add_to(p)
+
+
+def config_overrides(args) -> dict:
+    """The dotted-key overrides of ``args``: each option of :data:`OPTIONS` the command declares
+    that is given (or has a default of its own), then ``--set`` (which wins)."""
+    overrides = {option.key: value for option in OPTIONS
+                 if (value := getattr(args, option.dest, None)) is not None}
+    overrides.update(parse_overrides(getattr(args, "set", None)))
+    return overrides
+
+
+def check_options_apply(args, setting: str, name: str) -> None:
+    """Refuse, with one line, an option of ``args`` given to a configuration whose setting it does
+    not apply to (``--scale`` with ``paper-row``): never ignored."""
+    for option in OPTIONS:
+        value = getattr(args, option.dest, None)
+        if value is not None and value != option.default and setting not in option.settings:
+            raise ConfigError(f"{option.flag} applies to {' and '.join(SETTING_WORDS[s] for s in option.settings)}; "
+                              f"configuration {name!r} plans {SETTING_WORDS[setting]}")
+
+
+def resolved_config(args, source=None, extra=None):
+    """The resolved configuration: ``source`` (default: --config), ``extra`` overrides (a preset
+    such as ``--quick``'s), the options of :data:`OPTIONS` given, then --set overrides."""
+    source = args.config if source is None else source
+    base = load_config(source)  # its setting, to refuse an option that does not apply to it
+    check_options_apply(args, base.setting, base.name)
+    config = load_config(source, {**(extra or {}), **config_overrides(args)})
 
     if config.setting == "plant":  # a row has no initial view: its passive sweep starts it
         get_view_space(config.view_space).view_index(config.initial_view)  # refuse before any work
@@ -64,21 +172,7 @@ def configuration_options(p, output, named: str = "paper"):
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help=f"override one configuration key, e.g. --set registration.embedded_deformation.iterations=100 "
                         f"(repeatable; `{listed}` lists the keys)")
-    p.add_argument("--coverage-target", default=None, type=float, metavar="FRACTION", help=COVERAGE_TARGET_HELP)
-
-
-def replan_option(p) -> None:
-    p.add_argument("--replan-after", default=None, type=int, metavar="K",
-                   help="re-plan the rest of the plan from the captures after every K planned views "
-                        "(selection.replan_after; 0: plan once, the paper's; default: the configuration's, 0)")
-
-
-def view_space_arg(value: str) -> str:
-    try:
-        get_view_space(value)  # one clear error line for an unknown name or a bad file
-    except TpvpError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
-    return value
+    add_config_options(p, "--coverage-target")
 
 
 def case_options(p, output, case_options=True, frontier=True) -> None:
@@ -92,22 +186,5 @@ def case_options(p, output, case_options=True, frontier=True) -> None:
                        help="also the coverage-effort frontier of this case: the plan for targets 0.90 ... 1.0 "
                             "beside the exact optimum with perfect knowledge (frontier.csv, frontier.png; "
                             "about 10-60 s more)")
-    replan_option(p)
-    p.add_argument("--organ-targets", default=None, metavar="ORGAN=SHARE,...",
-                   help="the share of each organ's predicted planning voxels the plan must see, e.g. "
-                        "fruit=1.0,leaf=0.95 (organs: unknown, stem, leaf, petiole, peduncle, flower, fruit; the "
-                        "others keep --coverage-target's share); needs labelled scans (--labels) "
-                        "(selection.organ_targets)")
-    p.add_argument("--view-space", default=None, type=view_space_arg, metavar="SPACE",
-                   help=f"candidate views: {view_space_choices()} (default: the configuration's, hemisphere)")
-    p.add_argument("--initial-view", default=None, metavar="INDEX|NAME",
-                   help="initial view: an index or near_horizontal (17), oblique (8), near_top (21) "
-                        "(default: the configuration's, 17)")
-    p.add_argument("--scale", default=None, choices=SCALES,
-                   help="normalised: the paper's protocol, plant scaled to a 0.24 m largest side; native: plan "
-                        "at the plant's true size with --radius (default: normalised)")
-    p.add_argument("--radius", default=None, type=float, metavar="M",
-                   help="view-sphere radius in metres (native: around the real plant, default 0.4; "
-                        "normalised: default the view space's 0.4)")
-    p.add_argument("--up-axis", default=None, choices=UP_AXES,
-                   help="the scan axis that points up; the plant is turned so that it becomes +Z (default: +z)")
+    add_config_options(p, "--replan-after", "--organ-targets", "--view-space", "--initial-view", "--scale", "--radius",
+                       "--up-axis")

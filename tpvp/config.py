@@ -454,6 +454,9 @@ class RowConfig:
         if self.selection.replan_after:
             raise ConfigError(f"selection.replan_after={self.selection.replan_after}: re-planning from the captures "
                               f"is for single plants; a row is planned once (0)")
+        if self.selection.organ_targets:
+            raise ConfigError(f"selection.organ_targets={self.selection.organ_targets!r}: organ targets need a plant's "
+                              f"organ labels; a row has none (leave it empty)")
 
 
 SETTINGS = {"plant": PlantConfig, "row": RowConfig}

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from tpvp.cli_common import case_options, resolved_config
-from tpvp.config import load_config, parse_overrides
-from tpvp.errors import TpvpError
+from tpvp.cli_common import OPTION, case_options, config_overrides, resolved_config
+from tpvp.config import PlantConfig, flatten_keys, to_dict
+from tpvp.errors import ConfigError, TpvpError
 from tpvp.commands.rows import row_config, row_options
 from tpvp.experiments import plants as plant_experiments
 from tpvp.experiments import rows as row_experiments
@@ -42,26 +42,65 @@ def _experiments_rows(args) -> int:
                     "paper_values.csv, figures/")
 
 
-def _experiments_season(args) -> int:
+#: Options of the plants' season (their defaults) and of the rows' (``--rows``): given to the other, refused.
+PLANT_SEASON_ONLY = {"--species": list(season.SPECIES), "--view-spaces": list(season.VIEW_SPACES),
+                     "--replan-after": list(season.REPLAN_AFTER), "--dataset": None, "--plants": None}
+ROW_SEASON_ONLY = {"--rooms": list(season.ROOMS)}
+#: Keys the plants' season sets per case, each from its own option (a sweep over its values).
+SEASON_CASE_KEYS = {"view_space": "--view-spaces", "selection.replan_after": "--replan-after"}
+
+
+def _given(args, options: dict) -> str | None:
+    """The first of ``options`` (flag -> default) that ``args`` gives another value."""
+    dests = {"--replan-after": "replan_after_values"}
+    return next((flag for flag, default in options.items()
+                 if getattr(args, dests.get(flag, flag[2:].replace("-", "_"))) != default), None)
+
+
+def season_setup(args):
+    """The season's base configuration and cases, from the options alone (nothing is run). The
+    plants' target is the configuration's ``selection.coverage_target`` where one is given
+    (``--coverage-target``, ``--set``, a ``--config`` file that changes it), else the season's
+    0.98; a key the cases set per case, given by ``--config`` or ``--set``, is refused."""
     if args.rows:  # the paper-row configuration, unless --config names another row one
-        config = load_config("paper-row" if args.config == "paper" else args.config, parse_overrides(args.set))
+        if flag := _given(args, PLANT_SEASON_ONLY):
+            raise ConfigError(f"{flag} applies to the plants' season; --rows runs the greenhouse rows' season "
+                              f"(--rooms, --seeds, --sessions)")
+        config = resolved_config(args, "paper-row" if args.config == "paper" else args.config)
         if config.setting != "row":
             raise TpvpError(f"--rows plans rows; configuration {config.name!r} is a {config.setting} one")
-        cases = season.row_season_cases(args.quick, tuple(args.rooms), tuple(args.seeds),
-                                        args.sessions or season.ROW_SESSIONS)
+        return config, season.row_season_cases(args.quick, tuple(args.rooms), tuple(args.seeds),
+                                               args.sessions or season.ROW_SESSIONS)
+    if flag := _given(args, ROW_SEASON_ONLY):
+        raise ConfigError(f"{flag} applies to the rows' season (--rows); without it the season is of plants")
+    config = resolved_config(args)
+    if config.setting != "plant":
+        raise TpvpError(f"the plants' season plans plants; configuration {config.name!r} is a {config.setting} one "
+                        f"(--rows for the rows' season)")
+    given, default = config_overrides(args), flatten_keys(to_dict(PlantConfig()))
+    values = flatten_keys(to_dict(config))
+    for key, flag in SEASON_CASE_KEYS.items():
+        if key in given or values[key] != default[key]:
+            raise ConfigError(f"{key}={values[key]!r} (--config or --set): the season sets it per case from {flag}; "
+                              f"give {flag} instead")
+    key = "selection.coverage_target"
+    target = values[key] if key in given or values[key] != default[key] else season.COVERAGE_TARGET
+    if args.dataset is not None:
+        return config, season.dataset_season_cases(args.dataset, args.plants, args.quick, tuple(args.view_spaces),
+                                                   target, tuple(args.replan_after_values))
+    return config, season.season_cases(args.quick, tuple(args.species), tuple(args.seeds),
+                                       args.sessions or season.SESSIONS, tuple(args.view_spaces), target,
+                                       tuple(args.replan_after_values))
+
+
+def _experiments_season(args) -> int:
+    config, cases = season_setup(args)
+    if args.rows:
         arms = args.arms or list(season.ROW_SEASON_ARMS.defaults())
         print(f"{len(cases)} row(s) x {len(arms)} arm(s), {cases[0].sessions} sessions each; cache {args.cache}")
         raw = season.run_row_season_experiments(cases, arms, config, cache_dir=args.cache, workers=args.workers)
         return _publish(season.ROW_SEASON_EXPERIMENTS, args.output, raw, config, "season_totals", "figures/season.png")
-    config = resolved_config(args)
-    target = args.coverage_target if args.coverage_target is not None else season.COVERAGE_TARGET
-    if args.dataset is not None:
-        cases = season.dataset_season_cases(args.dataset, args.plants, args.quick, tuple(args.view_spaces), target,
-                                            tuple(args.replan_after_values))
-    else:
-        cases = season.season_cases(args.quick, tuple(args.species), tuple(args.seeds),
-                                    args.sessions or season.SESSIONS, tuple(args.view_spaces), target,
-                                    tuple(args.replan_after_values))
+    target = cases[0].coverage_target
     arms = args.arms or list(season.SEASON_ARMS.defaults())
     print(f"{len(cases)} plant(s) x {len(arms)} arm(s), {cases[0].sessions} sessions each, coverage target {target:g}; "
           f"cache {args.cache}")
@@ -135,10 +174,10 @@ def experiments_arguments(experiments) -> None:
                               "apply")
     seasons.add_argument("--rooms", nargs="+", default=list(season.ROOMS), help="(with --rows; default: %(default)s)")
     seasons.add_argument("--view-spaces", nargs="+", default=list(season.VIEW_SPACES), help="(default: %(default)s)")
-    seasons.add_argument("--replan-after", nargs="+", type=int, default=list(season.REPLAN_AFTER), metavar="K",
-                         dest="replan_after_values",
-                         help="re-plan each session's plan from its captures after every K planned views; several "
-                              "values run the season once per value, 0 = plan once (default: %(default)s)")
+    OPTION["--replan-after"].add_to(  # a sweep: several K, the season once per value (selection.replan_after)
+        seasons, nargs="+", dest="replan_after_values", default=list(season.REPLAN_AFTER),
+        help="re-plan each session's plan from its captures after every K planned views; several "
+             "values run the season once per value, 0 = plan once (default: %(default)s)")
     seasons.add_argument("--arms", nargs="+", default=None,
                          help=f"priors to plan from ({season.SEASON_ARMS.describe()})")
     seasons.add_argument("--quick", action="store_true",

@@ -5,11 +5,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from tpvp.cli_common import configuration_options, print_rows, print_warnings
-from tpvp.config import load_config, parse_overrides
+from tpvp.cli_common import add_config_options, configuration_options, print_rows, print_warnings, resolved_config
 from tpvp.errors import TpvpError
 from tpvp.io.publish import staged_folder
-from tpvp.scene.boxes import ROOMS
 from tpvp.simulate.greenhouse import build_row_scene, run_row_case
 from tpvp.simulate.outputs import write_row_case_outputs
 from tpvp.simulate.row_cases import QUICK, RowCase, dataset_cases
@@ -20,15 +18,7 @@ from tpvp.viz.background import drawing_pool
 def row_config(args):
     if args.dataset is not None and args.reference:
         raise TpvpError(f"--reference applies to generated rows; the rows of {args.dataset} are used as they are")
-    overrides = {"view_space": getattr(args, "room", "room1")}
-    if args.cover_resolution is not None:
-        overrides["selection.cover_resolution"] = args.cover_resolution
-    if args.coverage_target is not None:
-        overrides["selection.coverage_target"] = args.coverage_target
-    if args.quick:
-        overrides.update(QUICK)
-    overrides.update(parse_overrides(args.set))
-    config = load_config(args.config, overrides)
+    config = resolved_config(args, extra=QUICK if args.quick else None)
     if config.setting != "row":
         raise TpvpError(f"configuration {config.name!r} is for individual plants; use paper-row or a row YAML file")
     return config
@@ -44,9 +34,7 @@ def row_options(p, output, several_references: bool = False):
                         "positions see, or an emulated handheld phone capture" +
                         (" (several: each case once per reference, side by side in the tables)"
                          if several_references else "") + " (default: handheld; docs/greenhouse.md)")
-    p.add_argument("--cover-resolution", type=float, default=None, metavar="M",
-                   help="covering voxel of the set cover (paper: 0.10, 0.05, 0.04, 0.03; default: the "
-                        "configuration's, 0.04)")
+    add_config_options(p, "--cover-resolution")
     p.add_argument("--quick", action="store_true",
                    help="coarse ground truth (2 cm), fewer covering voxels, budgets and draws, for a fast look")
 
@@ -103,7 +91,7 @@ def _greenhouse(args) -> int:
 
 def greenhouse_arguments(p) -> None:
     row_options(p, "outputs/greenhouse")
-    p.add_argument("--room", default=ROOMS[0], choices=ROOMS, help="(default: %(default)s)")
+    add_config_options(p, "--room")
     p.add_argument("--pair", type=int, default=0,
                    help="which consecutive pair: sessions K -> K+1 (default: %(default)s)")
     p.add_argument("--seed", type=int, default=0, help="seed of the generated row (default: %(default)s)")

@@ -41,7 +41,6 @@ from tpvp.errors import ConfigError
 from tpvp.nbv.methods import NbvContext, make_nbv
 from tpvp.path.local import local_path_lengths, obstacle_radius
 from tpvp.simulate.optimum import plant_case
-from tpvp.simulate.single_plant import observation
 
 NBV_COLUMNS = ("views", "view", "coverage", "path_length", "seconds", "step_length", "radius", "tied")
 
@@ -125,7 +124,7 @@ def nbv_curve(scene, config: PlantConfig = PlantConfig(), max_views: int = 20) -
                 return local_path_lengths(space.positions[[start, *ids]], centre, radius)[0, 1:]
 
             view, tied = break_tie(choice.scores, int(choice.view), executed, moves, config.gmc.tie_break)
-        points = observation(scene, view)
+        points = scene.observe(view)
         nbv.integrate(view, points)
         seconds = time.perf_counter() - t
         step = 0.0 if previous is None else \

@@ -34,7 +34,7 @@ from tpvp.nbv.blockwise import blockwise_nbv
 from tpvp.registry import Registry
 from tpvp.scene import voxels
 from tpvp.scene.boxes import room_config
-from tpvp.scene.simulator import scan_points
+from tpvp.scene.frame import scan_points
 from tpvp.synthetic.greenhouse import generate_row_sessions
 from tpvp.synthetic.plants import generate_growth_series
 from tpvp.synthetic.scan import reference_points

@@ -34,9 +34,11 @@ from tpvp.errors import ConfigError, InputFileError
 from tpvp.io.atomic import atomic_path, atomic_write_text
 from tpvp.learning.grid import CELLS, occupancy_grid
 from tpvp.parallel import run_cases
-from tpvp.scene.simulator import build_scene, observation
+from tpvp.scene.frame import planning_frame
+from tpvp.scene.grid import plant_grid
 from tpvp.setcover.ilp import SetCoverConfig, solve_set_cover
 from tpvp.synthetic.plants import generate_session_pair
+from tpvp.visibility import oracle_voxels, visibility_matrix
 
 VIEWS = 32
 SPLITS = ("train", "validation", "test")
@@ -174,13 +176,17 @@ def sample_cloud(points: np.ndarray, count: int, rng) -> np.ndarray:
 
 
 def rendered_views(points, rotation_deg: float):
-    """The simulator's scene of one plant (hemisphere, paper configuration) rotated about the vertical:
-    (view positions, per-view observed plant points, bool (views, visible voxels): what each view sees)."""
+    """One plant (hemisphere, paper configuration) rotated about the vertical, in the simulator's
+    measurement model (its planning frame, ground-truth grid and visibility, as
+    :func:`tpvp.simulate.world.build_scene` renders today's plant): (view positions, per-view
+    observed plant points, bool (views, visible voxels): what each view sees)."""
     config = make_config("plant", {"view_space": "hemisphere", "scene.rotation_deg": float(rotation_deg)})
-    # No previous session is involved: the current plant stands in for it.
-    scene = build_scene(points, points, config)
-    observations = [observation(scene, v) for v in range(len(scene.view_space))]
-    return scene.view_space.positions, observations, scene.truth_visibility[:, scene.oracle].toarray().astype(bool)
+    frame = planning_frame(points, config, "current-session scan")
+    space, plant = frame.view_space, frame.reference
+    grid = plant_grid(plant.points, plant.table_points, config.gt_resolution)
+    truth = visibility_matrix(grid, space.positions, space.look_ats, frame.sensor)
+    observations = [grid.centres[truth[v].indices] for v in range(len(space))]
+    return space.positions, observations, truth[:, oracle_voxels(truth)].toarray().astype(bool)
 
 
 def state_sample(positions, observations, seen, states, cloud_points: int, rng) -> dict:

@@ -128,3 +128,10 @@ NBV_METHODS.register("geometric")(GeometricNbv)
 def make_nbv(context: NbvContext):
     """The NBV method named by ``context.config.method``."""
     return NBV_METHODS.get(context.config.method)(context)
+
+
+def start_nbv(scene, config):
+    """The configured NBV method on ``scene``'s view space and sensor, nothing executed yet (its
+    ``prior`` is the previous session in the planning frame): a simulator scene or what a real
+    session knows (:class:`tpvp.pipeline.plant.Known`)."""
+    return make_nbv(NbvContext(scene.view_space, np.zeros(3), scene.sensor, config.nbv, prior=scene.previous))

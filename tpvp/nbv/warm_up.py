@@ -1,19 +1,13 @@
 """The warm-up of a simulated session: the initial view and the configured number of NBVs, each
-executed in the simulator (:mod:`tpvp.scene.simulator`)."""
+executed in the simulator (``scene.observe``: :class:`tpvp.simulate.world.Scene`, or any scene that
+renders what a view observes)."""
 
 from __future__ import annotations
 
 import numpy as np
 
 from tpvp.errors import ConfigError
-from tpvp.nbv.methods import NbvContext, make_nbv
-from tpvp.scene.simulator import observation
-
-
-def start_nbv(scene, config):
-    """The configured NBV method on ``scene``'s view space and sensor, nothing executed yet (its
-    ``prior`` is the previous session in the planning frame)."""
-    return make_nbv(NbvContext(scene.view_space, np.zeros(3), scene.sensor, config.nbv, prior=scene.previous))
+from tpvp.nbv.methods import start_nbv
 
 
 def warm_up(scene, config):
@@ -21,13 +15,13 @@ def warm_up(scene, config):
     the executed views and their observations."""
     initial = scene.view_space.view_index(config.initial_view)
     nbv = start_nbv(scene, config)
-    seen = observation(scene, initial)
+    seen = scene.observe(initial)
     if len(seen) == 0:
         raise ConfigError(_initial_sees_nothing(scene, initial, config))
     nbv.integrate(initial, seen)
     for _ in range(config.nbv.warm_up_views):
         choice = nbv.next_view()
-        nbv.integrate(choice.view, observation(scene, choice.view))
+        nbv.integrate(choice.view, scene.observe(choice.view))
     return nbv
 
 

@@ -15,15 +15,15 @@ import signal
 import sys
 from pathlib import Path
 
-from tpvp.cli_common import COVERAGE_TARGET_HELP, case_options, print_warnings, replan_option, resolved_config
-from tpvp.config import parse_overrides
+from tpvp.cli_common import (add_config_options, case_options, check_options_apply, config_overrides, print_warnings,
+                              resolved_config)
 from tpvp.errors import InputFileError, TpvpError
 from tpvp.io import read_point_cloud
 from tpvp.io.publish import RunInterrupted, armed_step, late_signals, staged_file
 from tpvp.io.units import plant_size_warning
 from tpvp.scene.boxes import ROOMS
+from tpvp.scene.frame import NATIVE_RADIUS
 from tpvp.scene.organs import LABEL_KINDS, organ_codes
-from tpvp.scene.simulator import NATIVE_RADIUS
 from tpvp.sensor.camera import D435
 from tpvp.session import Session, read_depth, read_intrinsics, read_pose_file
 from tpvp.session.check import repair_folder
@@ -72,11 +72,7 @@ def session_arguments(session) -> None:
     plan.add_argument("folder", type=Path, help="the session folder")
     plan.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                       help="override one configuration key for this plan")
-    plan.add_argument("--coverage-target", default=None, type=float, metavar="FRACTION", help=COVERAGE_TARGET_HELP)
-    plan.add_argument("--organ-targets", default=None, metavar="ORGAN=SHARE,...",
-                      help="each organ's share of its predicted planning voxels, e.g. fruit=1.0,leaf=0.95 (a session "
-                           "started with --labels)")
-    replan_option(plan)
+    add_config_options(plan, "--coverage-target", "--organ-targets", "--replan-after")
     _wait_option(plan)
     plan.set_defaults(func=_session_plan)
     export = steps.add_parser("export", help="write today's fused model (the next session's --previous)")
@@ -199,14 +195,9 @@ def _session_add(args) -> int:
 
 
 def _session_plan(args) -> int:
-    overrides = parse_overrides(args.set)
-    if args.coverage_target is not None:
-        overrides["selection.coverage_target"] = args.coverage_target
-    if args.replan_after is not None:
-        overrides["selection.replan_after"] = args.replan_after
-    if args.organ_targets is not None:
-        overrides["selection.organ_targets"] = args.organ_targets
+    overrides = config_overrides(args)
     with _held(args) as session:
+        check_options_apply(args, session.config.setting, session.config.name)
         result = session.plan(overrides)
         captured = {c["view"] for c in session.captures}
         left = [v for v in session.state["plan"]["planned_views"] if v not in captured]

@@ -29,12 +29,11 @@ import numpy as np
 from tpvp.config import PlantConfig, with_overrides
 from tpvp.errors import ConfigError
 from tpvp.io import atomic_write_bytes
-from tpvp.nbv.warm_up import start_nbv
+from tpvp.nbv.methods import start_nbv
 from tpvp.pipeline.plant import Known, plan, planning_surface, transfer
 from tpvp.pipeline.replan import Prediction, Replan, prediction_of, replan
-from tpvp.scene import voxels
-from tpvp.scene.organs import check_organ_targets, reduced_organs
-from tpvp.scene.simulator import planning_frame
+from tpvp.scene.frame import known_from_previous, planning_frame
+from tpvp.scene.organs import check_organ_targets
 from tpvp.session.folder import KINDS, Request, Session
 
 
@@ -61,13 +60,10 @@ class PlantSession(Session):
         config, name = self.config, self.state["previous_file"]
         frame = planning_frame(previous_scan, config, name)
         frame.view_space.view_index(config.initial_view)  # refuse a bad initial view up front
-        previous = frame.to_planning(previous_scan)
-        resolution = config.scene.reduce_resolution
-        reduced = voxels.voxel_centroids(previous, resolution) if len(previous) > config.scene.reduce_above else previous
-        organs = reduced_organs(reduced, previous, self.previous_organs, resolution)
-        return Known(reduced, frame.view_space, frame.sensor, frame.plant_from_scan, frame.reference.table_points,
-                     (name, "today's captures"), {"previous_points": len(previous), "previous_points_used": len(reduced)},
-                     organs)
+        previous, organs, reduction = known_from_previous(frame.to_planning(previous_scan), config, name,
+                                                          self.previous_organs)
+        return Known(previous, frame.view_space, frame.sensor, frame.plant_from_scan, frame.reference.table_points,
+                     (name, "today's captures"), reduction, organs)
 
     def views(self) -> tuple[np.ndarray, np.ndarray]:
         space = self.scene.view_space

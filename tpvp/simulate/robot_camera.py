@@ -1,7 +1,7 @@
 """A stand-in for the robot's camera: today's full scan rendered at the poses a session asks for.
 
 For tutorials and tests: it plays the robot of a real session on a simulated pair. The captures are
-what the simulator observes (:mod:`tpvp.scene.simulator`, ``scene.frame = previous`` at native
+what the simulator observes (:mod:`tpvp.simulate.world`, ``scene.frame = previous`` at native
 scale, the frame a real session plans in), handed over as a real camera would: a cloud in the
 world frame (the observed voxel centres), or a depth image in metres (the pixel model's
 first-surface depth at the camera's intrinsics).
@@ -13,9 +13,10 @@ from dataclasses import replace
 
 import numpy as np
 
-from tpvp.scene.simulator import build_scene, observation, scan_points
+from tpvp.scene.frame import scan_points
 from tpvp.sensor.sensor import depth_image
 from tpvp.simulate.greenhouse import build_row_scene, observed_points
+from tpvp.simulate.world import build_scene
 from tpvp.session.plant import PlantSession
 from tpvp.visibility import safe_visibility
 
@@ -30,7 +31,7 @@ class StandInCamera:
 
     def cloud(self, view: int) -> np.ndarray:
         """What ``view`` observes of today's plant: voxel centres in the world frame."""
-        return scan_points(self.scene.plant_from_scan, observation(self.scene, view))
+        return scan_points(self.scene.plant_from_scan, self.scene.observe(view))
 
     def depth(self, view: int) -> np.ndarray:
         """The depth image (metres, NaN where nothing is seen) of ``view`` at the sensor's

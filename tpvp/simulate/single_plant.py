@@ -1,6 +1,6 @@
 """One individual-plant case of the paper, end to end in the simulator.
 
-The simulator (:mod:`tpvp.scene.simulator`) renders the initial view and the warm-up NBVs on
+The simulator (:mod:`tpvp.simulate.world`) renders the initial view and the warm-up NBVs on
 today's ground truth; the planner (:mod:`tpvp.pipeline.plant`) plans from what they observed and
 what the robot knew before (:func:`known`: never the ground truth); the plan is then executed on
 the ground truth and its coverage measured against the oracle set.
@@ -15,12 +15,13 @@ import numpy as np
 from scipy import sparse
 
 from tpvp.config import PlantConfig
-from tpvp.nbv.warm_up import start_nbv, warm_up
+from tpvp.nbv.methods import start_nbv
+from tpvp.nbv.warm_up import warm_up
 from tpvp.pipeline.plant import CaseResult, Known, PlanningSurface, Transfer, plan, planning_surface
 from tpvp.pipeline.plant import transfer as transfer_known
 from tpvp.pipeline.replan import prediction_of, replan
 from tpvp.scene.organs import organ_shares
-from tpvp.scene.simulator import Scene, build_scene, observation  # noqa: F401 (callers build the case's scene here)
+from tpvp.simulate.world import Scene, build_scene  # noqa: F401 (callers build the case's scene here)
 from tpvp.visibility import coverage_ratio, covered_voxels
 
 
@@ -100,7 +101,7 @@ def execute_replanning(scene: Scene, config: PlantConfig, transferred: Transfer,
     prediction, rows = prediction_of(surface, warm_up_views), []
     while left := result.planned_views[len(nbv.executed) - warm_up_views:]:
         for view in left[:step]:
-            nbv.integrate(view, observation(scene, view))
+            nbv.integrate(view, scene.observe(view))
         result, prediction, row = replan(known(scene), config, nbv, warm_up_views, result.planned_views, prediction,
                                          progress)
         rows.append(row)
