@@ -41,7 +41,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from tpvp.config import CALIBRATED_MISS_RATIO, make_config, with_overrides
+from tpvp.config_loading import make_config, with_overrides
+from tpvp.setcover.config import CALIBRATED_MISS_RATIO
 from tpvp.experiments import plants
 from results_file import write_results
 

@@ -23,7 +23,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from tpvp.config import load_config, with_overrides  # noqa: E402
+from tpvp.config_loading import load_config, with_overrides  # noqa: E402
 from tpvp.simulate.optimum import optimum  # noqa: E402
 from tpvp.simulate.frontier import DEFAULT_TARGETS, OPTIMUM_SECONDS, coverage_frontier  # noqa: E402
 from tpvp.simulate.single_plant import build_scene, transfer  # noqa: E402

@@ -35,7 +35,7 @@ if importlib.util.find_spec("tpvp") is None:  # not installed: run from a checko
 import numpy as np
 import pandas as pd
 
-from tpvp.config import make_config, with_overrides
+from tpvp.config_loading import make_config, with_overrides
 from tpvp.experiments import plants
 from tpvp.experiments.baselines import nbv_curve
 

@@ -21,8 +21,8 @@ DATA_TOOLS = ROOT.parent / "data_tools"  # above the library: it may load founda
 BENCHMARKS = Path(__file__).resolve().parent
 OWN = ("tpvp", "data_tools")
 TOP = ("cli", "cli_common", "commands", "__main__", "experiments", "session")  # may import anything below them
-ABOVE_STAGES = ("config", "pipeline", "learning", "simulate", "experiments", "session", "cli", "cli_common", "commands",
-                "__main__")
+ABOVE_STAGES = ("config", "config_loading", "pipeline", "learning", "simulate", "experiments", "session", "cli",
+                "cli_common", "commands", "__main__")
 #: What the simulation (``simulate``: above the planner and the sessions) never imports: what runs it.
 ABOVE_SIMULATE = ("learning", "experiments", "cli", "cli_common", "commands", "__main__")
 
@@ -73,8 +73,8 @@ def upward(source: str, target: str) -> bool:
     if target.startswith("data_tools"):
         return not source.startswith("data_tools")  # the library never loads the data tools
     if source.startswith("data_tools"):  # the layers that plan or run experiments are not theirs
-        return layer(target) in ("config", "pipeline", "learning", "simulate", "experiments", "session", "cli",
-                                 "cli_common", "commands")
+        return layer(target) in ("config", "config_loading", "pipeline", "learning", "simulate", "experiments",
+                                 "session", "cli", "cli_common", "commands")
     src, dst = layer(source), layer(target)
     if dst == "export":  # a plan written for a robot or a tool: only what runs a plan asks for it
         return src not in ("export", "commands", "cli", "__main__", "session")
@@ -86,8 +86,10 @@ def upward(source: str, target: str) -> bool:
         return dst in ("simulate", "experiments", "cli", "commands", "__main__")
     if src == "simulate":
         return dst in ABOVE_SIMULATE
+    if src == "config_loading":  # builds the configurations that config.py composes
+        return dst in ABOVE_STAGES and dst != "config"
     if src == "pipeline":  # above the stages and their configuration, below what runs it
-        return dst in ABOVE_STAGES and dst not in ("config", "pipeline")
+        return dst in ABOVE_STAGES and dst not in ("config", "config_loading", "pipeline")
     return dst in ABOVE_STAGES
 
 

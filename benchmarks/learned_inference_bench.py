@@ -33,7 +33,7 @@ except ImportError:  # not installed: run from a checkout
 import pandas as pd
 import torch
 
-from tpvp.config import make_config
+from tpvp.config_loading import make_config
 from tpvp.experiments import plants
 from tpvp.simulate.single_plant import build_scene
 from tpvp.pipeline.jit import compile_kernels

@@ -40,11 +40,12 @@ except ImportError:  # not installed: run from a checkout
 import numba
 import pandas as pd
 
-from tpvp.config import make_config
+from tpvp.config_loading import make_config
 from tpvp.experiments import plants
 from tpvp.simulate.single_plant import build_scene
 from tpvp.pipeline.jit import compile_kernels
-from tpvp.nbv import OccupancyMap, information_gain
+from tpvp.nbv.information_gain import information_gain
+from tpvp.nbv.occupancy import OccupancyMap
 from tpvp.nbv.information_gain import next_best_view
 from tpvp.nbv.methods import GeometricNbv, NbvChoice, NbvContext
 

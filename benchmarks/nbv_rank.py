@@ -46,7 +46,7 @@ except ImportError:  # not installed: run from a checkout
 import numba
 import pandas as pd
 
-from tpvp.config import make_config
+from tpvp.config_loading import make_config
 from tpvp.experiments import plants
 from tpvp.simulate.single_plant import added_coverage, build_scene, rank_of
 from tpvp.pipeline.jit import compile_kernels
@@ -159,9 +159,9 @@ def main(argv=None) -> int:
 
 def _compile_methods(methods) -> None:
     """One untimed call of every method on a tiny scene, so that its kernels are compiled."""
-    from tpvp.config import NbvConfig
+    from tpvp.nbv.config import NbvConfig
     from tpvp.sensor.sensor import SensorConfig
-    from tpvp.viewspace import get_view_space
+    from tpvp.viewspace.space import get_view_space
 
     space = get_view_space("hemisphere")
     rng = np.random.default_rng(0)

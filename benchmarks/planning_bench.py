@@ -46,9 +46,12 @@ try:
 except ImportError:  # not installed: run from a checkout
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from tpvp.path import TspConfig, band_path, local_path_lengths, shortest_open_path
-from tpvp.path import nearest_neighbour_path, path_length
-from tpvp.setcover import SetCoverConfig, solve_set_cover
+from tpvp.path.config import TspConfig
+from tpvp.path.local import local_path_lengths
+from tpvp.path.tsp import band_path, shortest_open_path
+from tpvp.path.tsp import nearest_neighbour_path, path_length
+from tpvp.setcover.config import SetCoverConfig
+from tpvp.setcover.ilp import solve_set_cover
 
 
 def fibonacci_sphere(n: int, radius: float) -> np.ndarray:
@@ -111,7 +114,8 @@ def tomato_instance():
     from tpvp.scene.grid import build_grid
     from tpvp.scene.normalise import normalise_plant
     from tpvp.scene.samples import load_sample
-    from tpvp.viewspace import INITIAL_VIEW_INDICES, load_view_space
+    from tpvp.viewspace.single_plant import load_view_space
+    from tpvp.viewspace.space import INITIAL_VIEW_INDICES
     from tpvp.visibility import visibility_matrix
 
     plant = normalise_plant(load_sample("tomato_0306"), table=False)
@@ -127,7 +131,7 @@ CLI_TARGET_S = 8.0
 
 def bench_whole_plan(quick: bool = False) -> pd.DataFrame:
     """Per-stage seconds of one plan (:func:`tpvp.simulate.single_plant.run_case`)."""
-    from tpvp.config import make_config
+    from tpvp.config_loading import make_config
     from tpvp.experiments import plants
     from tpvp.simulate.single_plant import build_scene, run_case
     from tpvp.pipeline.jit import compile_kernels

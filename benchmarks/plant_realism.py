@@ -25,7 +25,7 @@ from tpvp.scene.grid import plant_grid
 from tpvp.scene.normalise import normalise_plant
 from tpvp.synthetic.plants import generate_plant, generate_session_pair
 from tpvp.scene.samples import load_sample
-from tpvp.viewspace import load_view_space
+from tpvp.viewspace.single_plant import load_view_space
 from tpvp.visibility import oracle_voxels, visibility_matrix
 
 CURVE_VIEWS = (1, 2, 4, 8)

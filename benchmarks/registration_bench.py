@@ -21,7 +21,8 @@ import time
 
 import numpy as np
 
-from tpvp.registration import EDConfig, register_embedded_deformation
+from tpvp.registration.config import EDConfig
+from tpvp.registration.embedded_deformation import register_embedded_deformation
 from tpvp.registration.autograd_reference import optimise_autograd
 from tpvp.scene import voxels
 from tpvp.scene.normalise import normalise_plant

@@ -6,7 +6,7 @@ registration are shared by every miss ratio r of --ratios; the plan for a 98 % r
 views until no view is left. Printed per view space and r: views, views / the exact optimum for
 98 % (perfect knowledge, same initial view), true coverage (mean, min); and per view space the
 largest r whose mean reaches 98 % + MARGIN with no case below 97 % + MARGIN (the rule of
-``benchmarks/coverage_target_calibration.py``): :data:`tpvp.config.CALIBRATED_REPLAN_MISS_RATIO`.
+``benchmarks/coverage_target_calibration.py``): :data:`tpvp.setcover.config.CALIBRATED_REPLAN_MISS_RATIO`.
 
 ``--mode evaluate`` (seeds 0, 1, 2 and the bundled real pair): for each target of --targets, the
 one-shot plan (the calibrated one-shot rule) and the re-planned plan (the calibrated re-planning
@@ -30,7 +30,8 @@ from pathlib import Path
 
 import pandas as pd
 
-from tpvp.config import CALIBRATED_MISS_RATIO, CALIBRATED_REPLAN_MISS_RATIO, make_config, with_overrides
+from tpvp.config_loading import make_config, with_overrides
+from tpvp.setcover.config import CALIBRATED_MISS_RATIO, CALIBRATED_REPLAN_MISS_RATIO
 from tpvp.experiments import plants
 from results_file import write_results
 

@@ -15,7 +15,7 @@ import argparse
 import time
 from dataclasses import replace
 
-from tpvp.config import make_config
+from tpvp.config_loading import make_config
 from tpvp.simulate import greenhouse
 from tpvp.simulate.row_cases import RowCase
 from tpvp.pipeline.jit import compile_kernels

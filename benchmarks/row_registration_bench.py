@@ -18,7 +18,8 @@ import time
 
 import numpy as np
 
-from tpvp.registration.warp_field import SOLVERS, WarpFieldConfig, register_warp_field
+from tpvp.registration.config import SOLVERS, WarpFieldConfig
+from tpvp.registration.warp_field import register_warp_field
 from tpvp.scene.boxes import room_config
 from tpvp.synthetic.greenhouse import generate_row_sessions, row_correspondences
 

@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from tpvp.config import make_config
+from tpvp.config_loading import make_config
 from tpvp.simulate.greenhouse import build_row_scene, row_transfer
 from tpvp.pipeline.row import candidate_visibility
 from tpvp.simulate.row_cases import RowCase

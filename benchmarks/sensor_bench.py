@@ -52,7 +52,7 @@ from tpvp.scene.normalise import normalise_plant
 from tpvp.scene.samples import load_sample
 from tpvp.sensor.camera import D435, in_frustum, look_at_rotation, pixel_ray_directions
 from tpvp.sensor.sensor import SensorConfig, observe, observe_many
-from tpvp.viewspace import load_view_space
+from tpvp.viewspace.single_plant import load_view_space
 from tpvp.visibility import visibility_matrix
 
 try:

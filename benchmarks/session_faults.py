@@ -49,7 +49,7 @@ def tpvp(*args) -> list[str]:
 def prepare(scratch: Path) -> dict[str, Path]:
     """Capture clouds (millimetres, the previous model's frame) of the stand-in camera and two
     session folders: ``one`` (the initial view captured) and ``ready`` (the warm-up done)."""
-    from tpvp.config import make_config
+    from tpvp.config_loading import make_config
     from tpvp.io import read_point_cloud, write_point_cloud
     from tpvp.scene.samples import load_sample
     from tpvp.session import Session

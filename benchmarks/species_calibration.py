@@ -40,7 +40,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from tpvp.config import make_config
+from tpvp.config_loading import make_config
 from tpvp.experiments import plants
 from tpvp.experiments.species import HELIOS_SEEDS, seeds_of, with_split
 from tpvp.parallel import run_cases

@@ -2,7 +2,7 @@ import pytest
 
 from tpvp.scene.grid import plant_grid
 from tpvp.scene.normalise import normalise_plant
-from tpvp.viewspace import load_view_space
+from tpvp.viewspace.single_plant import load_view_space
 
 
 @pytest.fixture(scope="session")

@@ -8,7 +8,7 @@ import pandas as pd
 import pytest
 from scipy import sparse
 
-from tpvp.config import flatten_keys, make_config, to_dict
+from tpvp.config_loading import flatten_keys, make_config, to_dict
 from tpvp.experiments import ablation
 
 

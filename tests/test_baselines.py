@@ -8,10 +8,10 @@ import pytest
 from scipy import sparse
 
 from tpvp.errors import ConfigError
-from tpvp.config import with_overrides
+from tpvp.config_loading import with_overrides
 from tpvp.experiments.baselines import NBV_COLUMNS, break_tie, nbv_curve
 from tpvp.path.local import local_path_lengths, obstacle_radius
-from tpvp.setcover import SetCoverConfig
+from tpvp.setcover.config import SetCoverConfig
 from tpvp.setcover.maxcover import MaxCoverResult, max_coverage
 from tpvp.simulate.optimum import OPTIMUM_COLUMNS, optimum
 from tpvp.solvers import SOLVERS
@@ -107,7 +107,7 @@ def test_max_coverage_trivial_and_bad_input():
 
 @pytest.fixture(scope="module")
 def small_case():
-    from tpvp.config import make_config
+    from tpvp.config_loading import make_config
     from tpvp.simulate.single_plant import build_scene
     from tpvp.synthetic.plants import generate_session_pair
 
@@ -205,7 +205,7 @@ def test_gmc_gain_after_four_views_on_the_bundled_tomato():
     were the tie rule's); GMC's map (gmc.map_resolution) keeps telling the candidates apart."""
     from dataclasses import replace
 
-    from tpvp.config import make_config
+    from tpvp.config_loading import make_config
     from tpvp.experiments import plants
     from tpvp.experiments.baselines import gmc_nbv_config
     from tpvp.nbv.methods import NbvContext, make_nbv

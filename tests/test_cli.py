@@ -9,7 +9,7 @@ import pytest
 
 from tpvp import __version__
 from tpvp.cli import main
-from tpvp.config import load_config
+from tpvp.config_loading import load_config
 
 
 def _one_error_line(capsys, *words):

@@ -4,8 +4,8 @@ import dataclasses
 
 import pytest
 
-from tpvp.config import (DERIVED, PlantConfig, RowConfig, flatten_keys, config_yaml, load_config, make_config,
-                         parse_overrides, to_dict)
+from tpvp.config import PlantConfig, RowConfig
+from tpvp.config_loading import DERIVED, config_yaml, flatten_keys, load_config, make_config, parse_overrides, to_dict
 from tpvp.errors import ConfigError, InputFileError
 
 
@@ -116,7 +116,7 @@ def test_configs_are_frozen():
 def test_planning_target_from_the_asked_coverage():
     """The asked true coverage maps to the planning surface through the calibrated miss ratio of the
     view space (the smallest for other view spaces); 1.0 stays the full set cover."""
-    from tpvp.config import CALIBRATED_MISS_RATIO, SelectionConfig
+    from tpvp.setcover.config import CALIBRATED_MISS_RATIO, SelectionConfig
 
     asked = SelectionConfig(coverage_target=0.98)
     for space, ratio in CALIBRATED_MISS_RATIO.items():

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from tpvp.errors import ConfigError, PointCloudError
-from tpvp.inflation import InflationConfig, candidate_grid, inflate, inflate_voxels
+from tpvp.inflation.config import InflationConfig
+from tpvp.inflation.inflate import candidate_grid, inflate, inflate_voxels
 from tpvp.scene import voxels
 from tpvp.scene.normalise import normalise_plant
 from tpvp.scene.samples import load_sample

@@ -259,7 +259,7 @@ def test_a_plan_made_with_the_truth_sealed_is_the_simulation_s_plan():
     then the scene's truth (today's points, grid, visibility, oracle, organ labels) is sealed; the
     robot's knowledge taken from the sealed scene plans without reading any of it, and plans exactly
     what the simulation plans and measures with the truth in place."""
-    from tpvp.config import make_config
+    from tpvp.config_loading import make_config
     from tpvp.simulate.single_plant import build_scene, known, run_case
     from tpvp.nbv.warm_up import warm_up
     from tpvp.pipeline.plant import plan, transfer
@@ -283,6 +283,59 @@ def test_a_plan_made_with_the_truth_sealed_is_the_simulation_s_plan():
 def test_function_local_imports_are_few_and_say_why(report):
     assert len(report.local) <= MAX_LOCAL_IMPORTS, report.local
     assert [(file, line) for file, line, text in report.local if "#" not in text] == []
+
+
+#: What ``tpvp.config`` may load when it is imported: foundations and the stages' light ``config``
+#: modules (a stage's configuration dataclasses, beside its code but importing none of it).
+CONFIG_FOUNDATIONS = ("tpvp.errors", "tpvp.solvers", "tpvp.configuration_checks", "tpvp.sensor.camera")
+
+
+def test_the_configuration_imports_no_stage(import_graph):
+    """``tpvp.config`` composes the stages' configuration dataclasses and imports no registry and no
+    stage implementation (issue 48): its top-level imports, their packages and their imports reach
+    only foundations and ``tpvp.<stage>.config`` modules; method names and view spaces are resolved
+    by ``tpvp.config_loading`` when a configuration is made (function-local imports, left out here)."""
+    modules = {import_graph.module_name(path): path for path in (ROOT / "tpvp").rglob("*.py")}
+
+    def resolve(name):
+        while name and name not in modules:
+            name = name.rpartition(".")[0]
+        return name
+
+    seen, todo = set(), deque(["tpvp.config"])
+    while todo:
+        module = todo.popleft()
+        if module in seen:
+            continue
+        seen.add(module)
+        parts = module.split(".")
+        todo.extend(".".join(parts[:i]) for i in range(2, len(parts)))  # importing a module runs its packages
+        for names, inside, _ in import_graph.imports(modules[module]):
+            if not inside:
+                todo.extend(resolve(name) for name in names)
+    packages = {module for module in seen if modules[module].name == "__init__.py"}
+    stray = sorted(seen - packages - {"tpvp.config", *CONFIG_FOUNDATIONS}
+                   - {module for module in seen if module.endswith(".config")})
+    assert stray == []
+    assert "tpvp.nbv.config" in seen and "tpvp.registration.config" in seen
+
+
+def test_importing_the_configuration_loads_no_registry_or_kernel():
+    """What ``import tpvp.config`` and ``import tpvp.config_loading`` really load: no registry, no
+    numba kernel, no YAML reader, no learned method (the registries load at ``make_config``)."""
+    code = ("import sys, tpvp.config, tpvp.config_loading; "
+            "print(*sorted(m for m in sys.modules if m.startswith('tpvp.') or m in ('numba', 'yaml', 'torch', 'open3d')))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT)
+    loaded = set(out.stdout.split())
+    assert "tpvp.nbv.config" in loaded
+    assert [m for m in loaded if m.endswith(".methods") or m in ("tpvp.registry", "tpvp.viewspace.priors",
+                                                                  "tpvp.path.route", "numba", "yaml", "torch",
+                                                                  "open3d")] == []
+
+
+def test_the_configuration_module_stays_short():
+    """``tpvp/config.py`` composes the settings and nothing more (issue 48: at most 300 lines)."""
+    assert len((ROOT / "tpvp" / "config.py").read_text().splitlines()) <= 300
 
 
 def test_no_private_name_imported_across_packages(report):

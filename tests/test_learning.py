@@ -284,7 +284,7 @@ def test_view_state_injection_follows_ma_scvp():
 
 
 def test_learned_methods_run_on_both_view_spaces():
-    from tpvp.config import make_config
+    from tpvp.config_loading import make_config
     from tpvp.experiments.plants import default_cases, run_task
 
     for case in default_cases(quick=True)[::2]:  # one hemisphere and one sphere case
@@ -295,7 +295,7 @@ def test_learned_methods_run_on_both_view_spaces():
 
 
 def test_pc_nbv_never_repeats_or_leaves_the_hemisphere():
-    from tpvp.config import make_config
+    from tpvp.config_loading import make_config
     from tpvp.experiments.baselines import nbv_curve
     from tpvp.experiments.plants import _scene, default_cases
     from dataclasses import replace

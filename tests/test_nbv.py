@@ -7,14 +7,8 @@ import numpy as np
 import pytest
 
 from tpvp.errors import ConfigError, PointCloudError, SensorError
-from tpvp.nbv import (
-    FREE,
-    OCCUPIED,
-    UNKNOWN,
-    OccupancyMap,
-    information_gain,
-    next_best_view,
-)
+from tpvp.nbv.information_gain import information_gain, next_best_view
+from tpvp.nbv.occupancy import FREE, OCCUPIED, OccupancyMap, UNKNOWN
 from tpvp.nbv.occupancy import MODE_GAIN, MODE_VISIBILITY, walk
 from tpvp.scene import voxels
 from tpvp.scene.grid import build_grid
@@ -530,10 +524,10 @@ def test_incremental_map_equals_rebuild(tomato_scene, monkeypatch):
     """GeometricNbv integrates new views into its map while the map's geometry (sized on all
     observed points) stays; it equals the map rebuilt from every view, and the choices and gains
     equal those of rebuilding after every view with the walk's gains (the previous path)."""
-    from tpvp.config import NbvConfig
+    from tpvp.nbv.config import NbvConfig
     from tpvp.nbv.methods import GeometricNbv, NbvContext
     from tpvp.sensor.sensor import SensorConfig, observe
-    from tpvp.viewspace import get_view_space
+    from tpvp.viewspace.space import get_view_space
 
     grid, _ = tomato_scene
     space = get_view_space("hemisphere")

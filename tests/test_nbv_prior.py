@@ -3,15 +3,16 @@
 import numpy as np
 import pytest
 
-from tpvp.config import NbvConfig, make_config
+from tpvp.config_loading import make_config
+from tpvp.nbv.config import NbvConfig
 from tpvp.errors import ConfigError, PointCloudError
-from tpvp.nbv import OCCUPIED
+from tpvp.nbv.occupancy import OCCUPIED
 from tpvp.nbv.methods import NBV_METHODS, NbvContext, make_nbv
 from tpvp.nbv.prior import PriorNbv, prior_gains, prior_grid
 from tpvp.scene import voxels
 from tpvp.sensor import bruteforce
 from tpvp.sensor.sensor import SensorConfig
-from tpvp.viewspace import ViewSpace
+from tpvp.viewspace.space import ViewSpace
 
 RES = 0.01
 

@@ -16,7 +16,7 @@ from tpvp.cli import EVERY, build_parser
 from tpvp.cli_common import OPTION, OPTIONS, check_options_apply, config_overrides, resolved_config
 from tpvp.commands.experiments import season_setup
 from tpvp.commands.rows import row_config
-from tpvp.config import load_config, with_overrides
+from tpvp.config_loading import load_config, with_overrides
 from tpvp.errors import TpvpError
 
 #: A value other than the default, for each option of the table.

@@ -14,7 +14,7 @@ import pytest
 from scipy import sparse
 
 from tpvp.cli import main
-from tpvp.config import make_config
+from tpvp.config_loading import make_config
 from tpvp.errors import ConfigError
 from tpvp.simulate.single_plant import build_scene, run_case
 from tpvp.io import write_point_cloud

@@ -7,7 +7,8 @@ import pytest
 from scipy import sparse
 
 from tpvp.errors import ConfigError
-from tpvp.setcover import SetCoverConfig, solve_set_cover
+from tpvp.setcover.config import SetCoverConfig
+from tpvp.setcover.ilp import solve_set_cover
 from tpvp.setcover.partial import PartialCoverResult, partial_set_cover, partial_set_covers
 from tpvp.solvers import SOLVERS
 

@@ -6,18 +6,9 @@ import numpy as np
 import pytest
 
 from tpvp.errors import ConfigError
-from tpvp.path import (
-    TspConfig,
-    band_path,
-    local_path_length,
-    local_path_lengths,
-    local_path_points,
-    nearest_neighbour_path,
-    obstacle_radius,
-    path_length,
-    predicted_size,
-    shortest_open_path,
-)
+from tpvp.path.config import TspConfig
+from tpvp.path.local import local_path_length, local_path_lengths, local_path_points, obstacle_radius, predicted_size
+from tpvp.path.tsp import band_path, nearest_neighbour_path, path_length, shortest_open_path
 
 # --- local path ------------------------------------------------------------------------------
 

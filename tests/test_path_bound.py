@@ -6,7 +6,9 @@ import numpy as np
 import pytest
 
 from tpvp.errors import ConfigError
-from tpvp.path import TspConfig, band_path, open_path_lower_bound, shortest_open_path
+from tpvp.path.bound import open_path_lower_bound
+from tpvp.path.config import TspConfig
+from tpvp.path.tsp import band_path, shortest_open_path
 
 
 def _brute_force(d, start):

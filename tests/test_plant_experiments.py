@@ -4,7 +4,7 @@ import pandas as pd
 import pytest
 
 from tpvp.cli import main
-from tpvp.config import make_config
+from tpvp.config_loading import make_config
 from tpvp.errors import ConfigError, InputFileError
 from tpvp import parallel
 from tpvp.experiments import plants, runner

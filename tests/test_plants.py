@@ -157,7 +157,7 @@ def _visibility(points):
     2 mm voxels, largest side 0.24 m: the set-up of benchmarks/plant_realism.py)."""
     from tpvp.scene.grid import plant_grid
     from tpvp.scene.normalise import normalise_plant
-    from tpvp.viewspace import load_view_space
+    from tpvp.viewspace.single_plant import load_view_space
     from tpvp.visibility import oracle_voxels, visibility_matrix
 
     scene = normalise_plant(points, table=True)

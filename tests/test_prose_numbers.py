@@ -39,7 +39,7 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from tpvp.config import make_config
+from tpvp.config_loading import make_config
 from tpvp.experiments import plants, rows, season, shipped
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -379,7 +379,7 @@ def _only_pair_below(space: str, r: str, floor: float) -> list[str]:
 
 
 def _calibrated(space: str) -> str:
-    from tpvp.config import CALIBRATED_MISS_RATIO
+    from tpvp.setcover.config import CALIBRATED_MISS_RATIO
 
     return f"{CALIBRATED_MISS_RATIO[space]:g}"
 
@@ -416,7 +416,7 @@ ISSUE_VIEWS_PER_OPTIMUM = 1.15  # issue 39's target for views / optimum: a requi
 
 def _organ_margin_bullet() -> list[str]:
     m = _margins()
-    from tpvp.config import SelectionConfig
+    from tpvp.setcover.config import SelectionConfig
 
     counts = [v for margin in range(5) for v in (str(margin), m[("hemisphere", str(margin))]["cases_at_995"],
                                                  m[("sphere", str(margin))]["cases_at_995"])]
@@ -1947,7 +1947,7 @@ def _capture_fusion() -> list[str]:
 
 
 def _coverage_rule() -> list[str]:
-    from tpvp.config import CALIBRATED_MISS_RATIO, SelectionConfig
+    from tpvp.setcover.config import CALIBRATED_MISS_RATIO, SelectionConfig
 
     room = SelectionConfig(coverage_target=0.9).planning_target("room1")  # a view space without a calibrated ratio
     return [f"{CALIBRATED_MISS_RATIO['hemisphere']:g}", f"{CALIBRATED_MISS_RATIO['sphere']:g}",

@@ -7,7 +7,8 @@ from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
 from tpvp.errors import ConfigError, PointCloudError
-from tpvp.registration import EDConfig, register_embedded_deformation
+from tpvp.registration.config import EDConfig
+from tpvp.registration.embedded_deformation import register_embedded_deformation
 from tpvp.registration.autograd_reference import axis_angle_to_matrix, optimise_autograd, torch_losses
 from tpvp.registration.embedded_deformation import (
     _Adam,
@@ -130,7 +131,8 @@ def test_registration_never_imports_torch():
     import subprocess
     import sys
 
-    code = ("import sys, numpy as np; from tpvp.registration import register_embedded_deformation, EDConfig; "
+    code = ("import sys, numpy as np; from tpvp.registration.config import EDConfig; "
+            "from tpvp.registration.embedded_deformation import register_embedded_deformation; "
             "P = np.random.default_rng(0).uniform(0, 0.02, (200, 3)); "
             "register_embedded_deformation(P, P + 0.0005, EDConfig(iterations=3)); "
             "print('torch' in sys.modules)")

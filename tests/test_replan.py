@@ -10,7 +10,7 @@ import pytest
 from scipy import sparse
 
 from tpvp.cli import main
-from tpvp.config import load_config, make_config, with_overrides
+from tpvp.config_loading import load_config, make_config, with_overrides
 from tpvp.errors import ConfigError
 from tpvp.simulate.single_plant import build_scene, known, run_case, transfer
 from tpvp.simulate.robot_camera import StandInCamera

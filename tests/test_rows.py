@@ -16,12 +16,12 @@ from tpvp.cli import main
 from tpvp.errors import ConfigError, InputFileError, PointCloudError
 from tpvp.experiments import rows
 from tpvp.experiments.results import write_results
-from tpvp.config import make_config
+from tpvp.config_loading import make_config
 from tpvp.scene.boxes import ROOMS, candidate_look_ats, room_config
 from tpvp.sensor.sensor import ROW_RANGE
 from tpvp.simulate import greenhouse, row_cases
 from tpvp.synthetic.greenhouse import generate_row
-from tpvp.viewspace import get_view_space
+from tpvp.viewspace.space import get_view_space
 from tpvp.viewspace.lookat import (farthest_point_sampling, free_space_keys, round_robin_views,
                                    surface_frontiers)
 from tpvp.viewspace.priors import AUTHORS_PRIORS, LOOK_AT_PRIORS
@@ -322,7 +322,7 @@ def test_passive_fields_of_view_meet_the_mid_plane_where_the_pinhole_puts_them(t
 def test_a_new_candidate_source_and_route_are_one_registration_each(scene):
     """A row candidate source (a look-at prior) and a route added through the public hooks are
     chosen by name in the configuration; the pipeline needs nothing else."""
-    from tpvp.config import with_overrides
+    from tpvp.config_loading import with_overrides
     from tpvp.path.route import ROW_ROUTES
     from tpvp.path.tsp import band_path
 

@@ -8,7 +8,8 @@ from tpvp.scene import voxels
 from tpvp.scene.grid import build_grid
 from tpvp.scene.normalise import normalise_plant, rotate_z, table_slab
 from tpvp.scene.samples import load_sample
-from tpvp.viewspace import INITIAL_VIEW_INDICES, load_view_space
+from tpvp.viewspace.single_plant import load_view_space
+from tpvp.viewspace.space import INITIAL_VIEW_INDICES
 
 
 def test_voxel_convention_is_octomaps():
@@ -117,7 +118,7 @@ def test_bundled_samples_are_real_scans_in_metres():
 
 
 def test_generated_view_spaces_are_well_spread():
-    from tpvp.viewspace import generate_view_space, min_angle_deg
+    from tpvp.viewspace.tammes import generate_view_space, min_angle_deg
 
     bundled = min_angle_deg(load_view_space("hemisphere"))
     hemi = generate_view_space(32, hemisphere=True)

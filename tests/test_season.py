@@ -9,7 +9,7 @@ import pytest
 from scipy import sparse
 from scipy.spatial import cKDTree
 
-from tpvp.config import load_config
+from tpvp.config_loading import load_config
 from tpvp.errors import ConfigError
 from tpvp.experiments.season import SEASON_COLUMNS, prior_missing, run_season
 from tpvp.nbv.warm_up import warm_up
@@ -98,7 +98,7 @@ def test_a_season_equals_its_sessions_chained_by_hand(series):
 
 @pytest.mark.slow
 def test_the_arm_without_prior_is_the_geometric_nbv_until_the_target(series):
-    from tpvp.config import with_overrides
+    from tpvp.config_loading import with_overrides
     from tpvp.experiments.baselines import nbv_curve
     from tpvp.experiments.season import NONE_MAX_VIEWS
 
@@ -154,7 +154,7 @@ def test_the_season_command_writes_its_tables_and_figure_and_resumes(tmp_path, c
 
 @pytest.mark.slow
 def test_a_row_season_chains_its_sessions_from_its_own_reconstruction(tmp_path):
-    from tpvp.config import make_config
+    from tpvp.config_loading import make_config
     from tpvp.experiments import season
     from tpvp.simulate.row_cases import QUICK
     from tpvp.pipeline.row import plan as plan_row

@@ -11,7 +11,7 @@ import pytest
 
 from helpers import tree_digest
 from tpvp.cli import main
-from tpvp.config import make_config
+from tpvp.config_loading import make_config
 from tpvp.simulate.single_plant import run_case
 from tpvp.io import faults, write_point_cloud
 from tpvp.scene import voxels
@@ -63,7 +63,7 @@ def test_the_session_plans_what_the_simulator_plans(tmp_path, pair, space, initi
 @pytest.mark.slow
 @pytest.mark.parametrize("kind", ["cloud", "depth"])
 def test_a_row_session_plans_what_the_simulator_plans(tmp_path, kind):
-    from tpvp.config import load_config
+    from tpvp.config_loading import load_config
     from tpvp.simulate.greenhouse import run_row_case
     from tpvp.simulate.row_cases import QUICK, RowCase
 

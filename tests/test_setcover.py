@@ -7,7 +7,8 @@ import pytest
 from scipy import sparse
 
 from tpvp.errors import ConfigError
-from tpvp.setcover import SetCoverConfig, SetCoverResult, solve_set_cover
+from tpvp.setcover.config import SetCoverConfig
+from tpvp.setcover.ilp import SetCoverResult, solve_set_cover
 from tpvp.setcover import ilp as ilp_mod
 from tpvp.solvers import SOLVERS
 
@@ -217,7 +218,7 @@ def test_bad_input_raises_config_error():
 
 
 def test_real_tomato_cover_reaches_the_oracle(tomato_scene):
-    from tpvp.viewspace import INITIAL_VIEW_INDICES
+    from tpvp.viewspace.space import INITIAL_VIEW_INDICES
     from tpvp.visibility import covered_voxels, oracle_voxels, visibility_matrix
 
     grid, views = tomato_scene

@@ -2,7 +2,7 @@
 
 import pytest
 
-from tpvp.config import make_config
+from tpvp.config_loading import make_config
 from tpvp.simulate.single_plant import build_scene, run_case
 from tpvp.synthetic.plants import generate_session_pair
 

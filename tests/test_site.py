@@ -113,6 +113,14 @@ def test_site_pages_load_with_their_figures_links_and_3d_views_offline(tmp_path,
     pages = sorted(p.relative_to(site).as_posix() for p in site.rglob("*.html")
                    if "assets" not in p.relative_to(site).parts)
     assert "index.html" in pages
+    # plotly.js ships once, as an asset every page with a 3D view references instead of an inline copy
+    plotly_assets = list(site.rglob("plotly-*.js"))
+    assert [p.relative_to(site).as_posix() for p in plotly_assets] == [summary["plotly"]["asset"]]
+    assert summary["plotly"]["shared"] >= 1 and summary["plotly"]["inline"] == 0
+    for name in pages:
+        html = (site / name).read_text(encoding="utf-8")
+        assert "* plotly.js v" not in html, f"{name} inlines plotly.js"
+    assert any(f'src="{summary["plotly"]["asset"]}"' in (site / name).read_text(encoding="utf-8") for name in pages)
     base = served(site)
 
     external, problems, internal_links = [], [], set()
@@ -182,3 +190,32 @@ def test_site_pages_load_with_their_figures_links_and_3d_views_offline(tmp_path,
     reader = sum(mode != "full" for _, mode in summary["notebooks"])
     assert banners >= reader, "a reader's-mode page lacks its label"
     assert stderr_blocks == 0, f"{stderr_blocks} blocks of stderr on the notebook pages"
+
+
+def test_share_plotly_ships_one_copy_and_keeps_a_differing_one_inline(tmp_path):
+    from tools.site import share_plotly
+
+    plotly = "/**\n* plotly.js v4.1.1\n* Copyright\n*/\n!function(){window.Plotly={}}();\r\n"
+    other = plotly.replace("v4.1.1", "v2.0.0")
+    page = ('<html><body><script type="text/javascript">window.PlotlyConfig = {};</script>'
+            '<script type="text/javascript">{js}</script><div id="f"></div>'
+            '<script type="text/javascript">Plotly.newPlot("f", []);</script></body></html>')
+    (tmp_path / "assets").mkdir()
+    (tmp_path / "sub").mkdir()
+    (tmp_path / "a.html").write_bytes(page.replace("{js}", plotly).encode())
+    (tmp_path / "sub" / "b.html").write_bytes(page.replace("{js}", plotly).encode())
+    (tmp_path / "c.html").write_bytes(page.replace("{js}", other).encode())
+    (tmp_path / "plain.html").write_bytes(b"<html><script>var x;</script></html>")
+
+    summary = share_plotly(tmp_path)
+
+    assert summary == {"asset": "assets/plotly/plotly-4.1.1.js", "shared": 2, "inline": 1}
+    assert (tmp_path / "assets" / "plotly" / "plotly-4.1.1.js").read_bytes() == plotly.encode()
+    assert list(tmp_path.rglob("*.js")) == [tmp_path / "assets" / "plotly" / "plotly-4.1.1.js"]
+    expected = page.replace('<script type="text/javascript">{js}</script>',
+                            '<script type="text/javascript" src="{src}"></script>')
+    assert (tmp_path / "a.html").read_text() == expected.replace("{src}", "assets/plotly/plotly-4.1.1.js")
+    assert (tmp_path / "sub" / "b.html").read_text() == expected.replace("{src}", "../assets/plotly/plotly-4.1.1.js")
+    assert (tmp_path / "c.html").read_bytes() == page.replace("{js}", other).encode()  # another version: inline
+    assert (tmp_path / "plain.html").read_bytes() == b"<html><script>var x;</script></html>"
+    assert share_plotly(tmp_path) == {"asset": "assets/plotly/plotly-2.0.0.js", "shared": 1, "inline": 0}

@@ -4,8 +4,8 @@ import pulp
 import pytest
 
 from tpvp.errors import ConfigError
-from tpvp.path import TspConfig
-from tpvp.setcover import SetCoverConfig
+from tpvp.path.config import TspConfig
+from tpvp.setcover.config import SetCoverConfig
 from tpvp.solvers import SOLVERS, check_solver_settings, milp_solver
 
 

@@ -6,7 +6,8 @@ import json
 import numpy as np
 import pytest
 
-from tpvp.config import CALIBRATED_MISS_RATIO, make_config
+from tpvp.config_loading import make_config
+from tpvp.setcover.config import CALIBRATED_MISS_RATIO
 from tpvp.errors import ConfigError, InputFileError
 from tpvp.simulate.outputs import write_case_outputs
 from tpvp.simulate.single_plant import build_scene, run_case
@@ -15,7 +16,7 @@ from tpvp.registration.methods import REGISTRATION_METHODS, Alignment
 from tpvp.scene.normalise import up_rotation
 from tpvp.setcover.methods import SELECTION_METHODS, Selection
 from tpvp.synthetic.plants import generate_session_pair
-from tpvp.viewspace import VIEW_SPACES, get_view_space
+from tpvp.viewspace.space import VIEW_SPACES, get_view_space
 
 FAST = {"registration.embedded_deformation.iterations": 40}
 
@@ -203,7 +204,7 @@ def test_scan_frame_plan_maps_onto_the_planning_frame_through_the_written_transf
 
 
 def test_configuration_round_trip_runs_the_same_case(tmp_path, scene):
-    from tpvp.config import config_yaml, load_config
+    from tpvp.config_loading import config_yaml, load_config
 
     config = make_config("plant", {**FAST, "nbv.pixel_stride": 8})
     (tmp_path / "config.yaml").write_text(config_yaml(config))

@@ -8,7 +8,9 @@ import pytest
 from scipy import sparse
 from test_partial_cover import brute_fewest
 
-from tpvp.config import CALIBRATED_MISS_RATIO, PlantConfig, SelectionConfig, make_config
+from tpvp.config import PlantConfig
+from tpvp.config_loading import make_config
+from tpvp.setcover.config import CALIBRATED_MISS_RATIO, SelectionConfig
 from tpvp.errors import ConfigError
 from tpvp.pipeline.plant import PlanningSurface, selection_problem
 from tpvp.inflation.weights import (SURFACE_CLASSES, SurfaceWeightsConfig, surface_area, surface_classes,

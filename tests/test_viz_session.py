@@ -5,7 +5,7 @@ tolerance both ways."""
 import numpy as np
 import pytest
 
-from tpvp.config import make_config
+from tpvp.config_loading import make_config
 from tpvp.scene.samples import load_sample
 from tpvp.session import Session
 from tpvp.viz.session import (model_agreement, plot_model_comparison, plot_session_state, plot_session_workflow,

@@ -8,7 +8,8 @@ from scipy import sparse
 from scipy.sparse import linalg as splinalg
 from scipy.spatial import cKDTree
 
-from tpvp.config import RowConfig, make_config
+from tpvp.config import RowConfig
+from tpvp.config_loading import make_config
 from tpvp.errors import ConfigError, PointCloudError
 from tpvp.registration.methods import REGISTRATION_METHODS, register
 from tpvp.registration.warp_field import (

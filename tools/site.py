@@ -15,7 +15,9 @@ repository's ``mkdocs.yml``) in strict mode:
 
 The site is published to ``destination`` through :func:`tpvp.io.publish.staged_folder`: an
 interrupted or failed build leaves the previous site whole. It needs no network: no web fonts,
-plotly.js is inline in the notebooks' outputs, search runs in the browser, and MathJax is a local
+plotly.js ships once as ``assets/plotly/plotly-<version>.js`` (the notebooks' outputs carry it inline;
+:func:`share_plotly` replaces each identical copy with a ``<script src>`` at the same place), search
+runs in the browser, and MathJax is a local
 copy (:func:`tools.notebooks.mathjax_folder`) or, where none is installed, math stays
 as TeX text.
 """
@@ -23,6 +25,7 @@ as TeX text.
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import os
 import posixpath
@@ -43,6 +46,7 @@ DOCS = ROOT / "docs"
 README = ROOT / "README.md"
 CONFIG = ROOT / "mkdocs.yml"
 MATHJAX_DIR = "assets/mathjax"
+PLOTLY_DIR = "assets/plotly"
 MATHJAX_CONFIG = "TeX-AMS-MML_HTMLorMML-full,Safe,local/tpvp"
 # the copy of MathJax 2.7 in jupyter-server-mathjax ships the STIX web fonts only
 _MATHJAX_LOCAL_CONFIG = """MathJax.Hub.Config({
@@ -251,6 +255,61 @@ def _copy_mathjax(source: Path, target: Path) -> None:
 
 
 # --------------------------------------------------------------------------------------------------
+# plotly.js: one shared copy
+# --------------------------------------------------------------------------------------------------
+
+# an inline script whose text starts with plotly.js' license banner (the version in group 2)
+_PLOTLY_SCRIPT = re.compile(rb"<script\b([^>]*)>(?=/\*\*\n\* plotly\.js v([0-9][0-9A-Za-z.+-]{0,40})\b)")
+_SRC = re.compile(rb"\bsrc\s*=", re.IGNORECASE)
+
+
+def _plotly_scripts(html: bytes):
+    """``(start, end, attributes, version, body)`` of each inline plotly.js ``<script>`` of a page (bytes)."""
+    for match in _PLOTLY_SCRIPT.finditer(html):
+        if _SRC.search(match.group(1)):
+            continue
+        close = html.find(b"</script>", match.end())
+        if close >= 0:
+            yield match.start(), close + len(b"</script>"), match.group(1), match.group(2), html[match.end():close]
+
+
+def share_plotly(site) -> dict:
+    """Ship plotly.js once: the copy inlined in the most pages (the first page's, sorted by path, on a
+    tie) goes to ``PLOTLY_DIR/plotly-<version>.js``, and every inline copy byte-identical to it becomes a
+    synchronous ``<script src>`` at the same place in its page (so it still runs before the figures'
+    ``Plotly.newPlot``); a copy that differs (another version) stays inline. Returns
+    ``{"asset": site path or None, "shared": scripts replaced, "inline": scripts left inline}``."""
+    site = Path(site)
+    pages = sorted((p for p in site.rglob("*.html") if "assets" not in p.relative_to(site).parts),
+                   key=lambda p: p.relative_to(site).as_posix())
+    copies = {}  # sha256 of a copy -> [pages inlining it, order first seen, version, the copy]
+    for page in pages:
+        for *_, version, body in _plotly_scripts(page.read_bytes()):
+            copies.setdefault(hashlib.sha256(body).hexdigest(), [0, len(copies), version, body])[0] += 1
+    if not copies:
+        return {"asset": None, "shared": 0, "inline": 0}
+    _, _, version, shared = max(copies.values(), key=lambda c: (c[0], -c[1]))
+    asset = f"{PLOTLY_DIR}/plotly-{version.decode('ascii')}.js"
+    (site / asset).parent.mkdir(parents=True, exist_ok=True)
+    (site / asset).write_bytes(shared)
+    replaced = inline = 0
+    for page in pages:
+        html = page.read_bytes()
+        parts, at = [], 0
+        for start, end, attributes, _, body in _plotly_scripts(html):
+            if body != shared:
+                inline += 1
+                continue
+            src = posixpath.relpath(asset, page.parent.relative_to(site).as_posix() or ".")
+            parts += [html[at:start], b"<script", attributes, b' src="', src.encode(), b'"></script>']
+            at = end
+            replaced += 1
+        if parts:
+            page.write_bytes(b"".join(parts) + html[at:])
+    return {"asset": asset, "shared": replaced, "inline": inline}
+
+
+# --------------------------------------------------------------------------------------------------
 # building
 # --------------------------------------------------------------------------------------------------
 
@@ -343,6 +402,7 @@ def build_site(notebooks_folder, destination, *, docs=DOCS, readme=README, allow
                                    allow_missing=allow_missing, mathjax=mathjax)
         with staged_folder(destination, inputs=(notebooks_folder,), what="site folder") as stage:
             _mkdocs_build(summary["config"], stage.folder, strict)
+            summary["plotly"] = share_plotly(stage.folder)
     summary.update(seconds=time.perf_counter() - start, destination=destination)
     summary.pop("config")
     if progress:

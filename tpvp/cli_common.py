@@ -15,10 +15,11 @@ import sys
 from dataclasses import dataclass
 from typing import Callable
 
-from tpvp.config import SCALES, UP_AXES, load_config, parse_overrides
+from tpvp.config_loading import load_config, parse_overrides
+from tpvp.scene.config import SCALES, UP_AXES
 from tpvp.errors import ConfigError, TpvpError
 from tpvp.scene.boxes import ROOMS
-from tpvp.viewspace import get_view_space, view_space_choices
+from tpvp.viewspace.space import get_view_space, view_space_choices
 
 # One rule for plants and rows (selection.coverage_target, SelectionConfig.planning_target).
 COVERAGE_TARGET_HELP = ("true coverage of today's plants to aim for, e.g. 0.98: the fewest views that see "

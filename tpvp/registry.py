@@ -5,7 +5,8 @@ CLI refer to it by name, and the experiment code never changes.
 
 Packages above the stages add methods without a stage importing them: a *plugin* module registers
 its methods when imported, and a registry imports the plugins the first time it is asked for a name
-it does not hold (or for the list of names). Plugins are tpvp's learned planners
+it does not hold (or for the list of names). Plugins are the prior-guided NBV (:mod:`tpvp.nbv.prior`:
+its scipy and visibility code stay out of ``import tpvp.nbv``), tpvp's learned planners
 (:mod:`tpvp.learning.methods`) and any module another package declares under the entry-point group
 ``tpvp.plugins`` (``[project.entry-points."tpvp.plugins"] name = "package.module"``).
 """
@@ -17,7 +18,7 @@ from importlib.metadata import entry_points
 
 from tpvp.errors import ConfigError
 
-BUILTIN_PLUGINS = ("tpvp.learning.methods",)
+BUILTIN_PLUGINS = ("tpvp.nbv.prior", "tpvp.learning.methods")
 PLUGIN_GROUP = "tpvp.plugins"
 _plugins_loaded = False
 

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from tpvp.cli_common import case_options, resolved_config
-from tpvp.config import config_yaml, derived_table
+from tpvp.config_loading import config_yaml, derived_table
 
 
 def _show_config(args) -> int:

@@ -5,7 +5,8 @@ from __future__ import annotations
 from pathlib import Path
 
 from tpvp.cli_common import OPTION, case_options, config_overrides, resolved_config
-from tpvp.config import PlantConfig, flatten_keys, to_dict
+from tpvp.config import PlantConfig
+from tpvp.config_loading import flatten_keys, to_dict
 from tpvp.errors import ConfigError, TpvpError
 from tpvp.commands.rows import row_config, row_options
 from tpvp.experiments import plants as plant_experiments

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from tpvp.config import load_config
+from tpvp.config_loading import load_config
 from tpvp.errors import ConfigError, InputFileError
 from tpvp.export.colmap import write_colmap
 from tpvp.export.images import IMAGES, image_files

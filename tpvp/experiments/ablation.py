@@ -18,7 +18,7 @@ import numpy as np
 import pandas as pd
 from scipy import sparse
 
-from tpvp.config import with_overrides
+from tpvp.config_loading import with_overrides
 from tpvp.experiments.plants import default_cases, method_config
 from tpvp.experiments.results import mean_std
 from tpvp.simulate.single_plant import known, run_case, transfer

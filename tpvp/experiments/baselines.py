@@ -8,7 +8,7 @@ after the other and the view's ground-truth observation is integrated. The curve
 number of executed views ``n = 1 .. max_views`` (the initial view included), so the paper's budgets
 5/10/15/20 are rows of one run. It stops early only when every view of the view space is executed.
 
-GMC's own settings (``config.gmc``, :class:`tpvp.config.GmcConfig`): its occupancy map has the
+GMC's own settings (``config.gmc``, :class:`tpvp.nbv.config.GmcConfig`): its occupancy map has the
 ground-truth voxel, ``gmc.map_resolution`` = 1 x gt_resolution = 2 mm, not the warm-up's 32 voxels
 across (about 9 mm on a tomato, where every candidate's gain is 0 after three or four views and the
 curve measured the tie rule; the authors' 4 mm keeps it positive only in their probabilistic map,

@@ -23,7 +23,8 @@ from pathlib import Path
 import numpy as np
 from scipy import sparse
 
-from tpvp.config import PlantConfig, with_overrides
+from tpvp.config import PlantConfig
+from tpvp.config_loading import with_overrides
 from tpvp.experiments.baselines import nbv_curve
 from tpvp.simulate.single_plant import Scene, run_case
 from tpvp.learning.methods import learned_one_shot

@@ -20,7 +20,8 @@ import numpy as np
 import pandas as pd
 from scipy import sparse
 
-from tpvp.config import PlantConfig, make_config, with_overrides
+from tpvp.config import PlantConfig
+from tpvp.config_loading import make_config, with_overrides
 from tpvp.errors import ConfigError, InputFileError
 from tpvp.experiments.baselines import nbv_curve
 from tpvp.experiments.comparison import write_comparison_files

@@ -9,7 +9,7 @@ import json
 import numpy as np
 import pandas as pd
 
-from tpvp.config import config_yaml
+from tpvp.config_loading import config_yaml
 from tpvp.io import atomic_write_text
 from tpvp.io.publish import staged_folder
 from tpvp.provenance import provenance

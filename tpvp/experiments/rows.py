@@ -19,7 +19,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from tpvp.config import RowConfig, make_config
+from tpvp.config import RowConfig
+from tpvp.config_loading import make_config
 from tpvp.experiments import runner
 from tpvp.experiments.results import mean_std
 from tpvp.experiments.pose_noise import passive_map, pose_noise_study, summarise

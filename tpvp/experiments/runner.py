@@ -22,7 +22,7 @@ from typing import Callable
 import pandas as pd
 
 from tpvp import __version__
-from tpvp.config import to_dict
+from tpvp.config_loading import to_dict
 from tpvp.errors import ConfigError
 from tpvp.io import atomic_write_bytes
 from tpvp.parallel import run_cases

@@ -19,7 +19,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from tpvp.config import PlantConfig, make_config, with_overrides
+from tpvp.config import PlantConfig
+from tpvp.config_loading import make_config, with_overrides
 from tpvp.errors import ConfigError, InputFileError
 from tpvp.experiments import runner
 from tpvp.experiments.results import mean_std

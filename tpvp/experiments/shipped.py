@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from tpvp.config import make_config
+from tpvp.config_loading import make_config
 from tpvp.errors import ConfigError, run_command
 from tpvp.experiments import ablation, plants, rows, season, species
 from tpvp.experiments.runner import cached_experiments, experiment_cache

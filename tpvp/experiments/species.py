@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from tpvp.config import make_config
+from tpvp.config_loading import make_config
 from tpvp.errors import ConfigError
 from tpvp.experiments import plants
 from tpvp.simulate.optimum import optimum

@@ -20,6 +20,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from tpvp.errors import ConfigError, checked_cloud
+from tpvp.inflation.config import InflationConfig
 from tpvp.scene import voxels
 
 # Refuse candidate grids larger than this (a sign of wrong units or a wrong half_size).
@@ -27,29 +28,6 @@ from tpvp.scene import voxels
 # the coarse reconstruction, the inflation layer.
 SURFACE_LAYERS = ("transferred P~", "coarse Q", "inflation I")
 _MAX_CANDIDATES = 50_000_000
-
-
-@dataclass(frozen=True)
-class InflationConfig:
-    """Single-plant inflation (defaults: 2 mm ground-truth resolution x the reference's factors).
-
-    step: candidate grid spacing (m). gamma_near: keep a candidate only if its nearest Q point is
-    closer than this (strict). gamma_far: ... and its nearest P~ point farther than this (strict).
-    enabled: False is the paper's "w/o inflation" ablation (Table III): the planning cloud is the
-    aligned previous session P~ alone (no I, no Q). The one switch for it; the reference's
-    ``add_current_inflation=False`` (planning on P~ u Q) is not offered.
-    """
-
-    step: float = 0.004
-    gamma_near: float = 0.003
-    gamma_far: float = 0.005
-    enabled: bool = True
-
-    def __post_init__(self):
-        for name in ("step", "gamma_near", "gamma_far"):
-            v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and np.isfinite(v) and v > 0):
-                raise ConfigError(f"InflationConfig.{name} must be a positive length in metres, got {v!r}")
 
 
 @dataclass(frozen=True)

@@ -29,7 +29,7 @@ import numpy as np
 import pandas as pd
 from scipy import sparse
 
-from tpvp.config import make_config
+from tpvp.config_loading import make_config
 from tpvp.errors import ConfigError, InputFileError
 from tpvp.io.atomic import atomic_path, atomic_write_text
 from tpvp.learning.grid import CELLS, occupancy_grid

@@ -87,6 +87,7 @@ from tqdm.auto import tqdm
 from tpvp.errors import ConfigError
 from tpvp.nbv.occupancy import (FALSE, FREE, MODE_CARVE, MODE_FREESPACE, MODE_GAIN, OCCUPIED, TRUE, UNKNOWN, ZERO,
                                 pixel_ray, walk)
+from tpvp.nbv.config import BlockwiseNbvConfig
 from tpvp.numba_tools import JIT
 from tpvp.scene.boxes import OrientedBox, RoomConfig, room_config
 from tpvp.scene.grid import OccupancyGrid
@@ -96,37 +97,6 @@ from tpvp.viewspace import lookat
 
 NOT_SEEN = np.iinfo(np.int32).max  # first_seen of a voxel that no view observed
 START = -1  # first_seen of a voxel observed by a start view
-
-
-@dataclass(frozen=True)
-class BlockwiseNbvConfig:
-    """Parameters of the block-wise NBV (defaults: the paper's row setting, see the module doc)."""
-
-    blocks_along: int = 5  # segments along the row (view-box local x)
-    bands: int = 2  # height bands (view-box local z)
-    look_ats_per_block: int = 50  # frontier targets sampled per NBV step
-    map_resolution: float = 0.05  # m, occupancy map voxel
-    pixel_stride: int = 20  # gain rays: every n-th pixel in u and v
-    target_margin: float | None = 0.5  # m, block region for targets: segment and band grown by this
-    plan_views: int | None = 500  # block quotas from this planned length (None: from the budget)
-    carve_pixels: bool = True  # carve free space along pixel rays without a return
-
-    def __post_init__(self):
-        for name in ("blocks_along", "bands", "look_ats_per_block", "pixel_stride"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or int(value) != value or int(value) < 1:
-                raise ConfigError(f"{name} must be a positive integer, got {value!r}")
-        if not (np.isfinite(self.map_resolution) and self.map_resolution > 0):
-            raise ConfigError(f"map_resolution must be > 0 m, got {self.map_resolution!r}")
-        if self.target_margin is not None and not (np.isfinite(self.target_margin) and self.target_margin >= 0):
-            raise ConfigError(f"target_margin must be >= 0 m or None, got {self.target_margin!r}")
-        if self.plan_views is not None and (isinstance(self.plan_views, bool) or int(self.plan_views) != self.plan_views
-                                            or int(self.plan_views) < 1):
-            raise ConfigError(f"plan_views must be a positive integer or None, got {self.plan_views!r}")
-
-    @property
-    def n_blocks(self) -> int:
-        return int(self.blocks_along) * int(self.bands)
 
 
 # ----------------------------------------------------------------------------- kernels

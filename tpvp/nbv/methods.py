@@ -29,7 +29,7 @@ NBV_METHODS = Registry("NBV method")
 
 @dataclass(frozen=True, eq=False)
 class NbvContext:
-    """What an NBV method may know: the candidate views (``tpvp.viewspace.ViewSpace``: positions,
+    """What an NBV method may know: the candidate views (``tpvp.viewspace.space.ViewSpace``: positions,
     look-ats), the object centre, the sensor (``SensorConfig``), its own ``NbvConfig`` and,
     optionally, the previous session's model ``prior`` (``(N, 3)`` points in the planning frame;
     None when there is none; methods that need it say so)."""

@@ -28,6 +28,7 @@ import numpy as np
 from numba import njit
 
 from tpvp.errors import ConfigError, PointCloudError
+from tpvp.nbv.config import OccupancyMapConfig
 from tpvp.numba_tools import JIT
 from tpvp.scene import voxels
 from tpvp.sensor.camera import D435, Intrinsics, look_at_rotation
@@ -38,30 +39,6 @@ FREE = np.uint8(1)
 OCCUPIED = np.uint8(2)
 
 _MAX_CELLS = 50_000_000
-
-
-@dataclass(frozen=True)
-class OccupancyMapConfig:
-    """Map geometry (defaults: docs/single_plant.md#occupancy-map). ``resolution``: a fixed voxel
-    size (m) instead of ``2 * predicted_size / voxels_across`` (None, the default; the GMC baseline
-    sets it, :class:`tpvp.config.GmcConfig`)."""
-
-    voxels_across: int = 32  # voxel = 2 * predicted_size / voxels_across
-    size_factor: float = 17 / 16  # predicted_size = size_factor * max distance centre -> point
-    padding: int = 1  # voxels added on every side of the cube centre +- predicted_size
-    resolution: float | None = None  # fixed voxel (m); None: 2 * predicted_size / voxels_across
-
-    def __post_init__(self):
-        if self.resolution is not None and not (isinstance(self.resolution, (int, float))
-                                                and not isinstance(self.resolution, bool)
-                                                and math.isfinite(self.resolution) and self.resolution > 0):
-            raise ConfigError(f"resolution must be a voxel size > 0 m or None, got {self.resolution!r}")
-        if int(self.voxels_across) < 1:
-            raise ConfigError(f"voxels_across must be a positive integer, got {self.voxels_across!r}")
-        if not (self.size_factor > 0):
-            raise ConfigError(f"size_factor must be > 0, got {self.size_factor!r}")
-        if int(self.padding) < 0:
-            raise ConfigError(f"padding must be >= 0 voxels, got {self.padding!r}")
 
 
 def _as_points(points, name: str) -> np.ndarray:

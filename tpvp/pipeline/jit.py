@@ -21,7 +21,8 @@ import time
 import numpy as np
 
 from tpvp.errors import ConfigError
-from tpvp.nbv import OccupancyMap, information_gain, next_best_view
+from tpvp.nbv.information_gain import information_gain, next_best_view
+from tpvp.nbv.occupancy import OccupancyMap
 from tpvp.path.tsp import TspConfig, shortest_open_path
 from tpvp.registration.embedded_deformation import compile_kernels as compile_registration
 from tpvp.scene.grid import build_grid

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from tpvp.config import config_yaml
+from tpvp.config_loading import config_yaml
 from tpvp.io import atomic_write_text
 from tpvp.io.plan import plan_table, write_plan
 from tpvp.provenance import provenance

@@ -19,7 +19,7 @@ from scipy import sparse
 
 from tpvp.config import PlantConfig
 from tpvp.errors import ConfigError
-from tpvp.inflation import inflate
+from tpvp.inflation.inflate import inflate
 from tpvp.inflation.weights import surface_area, surface_classes, surface_weights
 from tpvp.path.local import predicted_size
 from tpvp.path.route import path_through
@@ -27,6 +27,7 @@ from tpvp.pipeline.result import PlanResult
 from tpvp.pipeline.surface import planning_visibility
 from tpvp.pipeline.timing import timed
 from tpvp.registration.methods import register
+from tpvp.scene.frame import scan_points
 from tpvp.scene.organs import CODE, organ_shares, voxel_organs
 from tpvp.scene.voxels import contains_keys, dilate_keys
 from tpvp.setcover.methods import SelectionProblem, select_views
@@ -60,8 +61,7 @@ class Known:
 
     def to_scan(self, points) -> np.ndarray:
         """Planning-frame points in the scan's (world) frame."""
-        matrix = np.asarray(self.plant_from_scan, dtype=np.float64)
-        return (np.asarray(points, dtype=np.float64) - matrix[:3, 3]) @ np.linalg.inv(matrix[:3, :3]).T
+        return scan_points(self.plant_from_scan, points)
 
     def to_planning(self, points) -> np.ndarray:
         matrix = self.plant_from_scan

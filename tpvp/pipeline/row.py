@@ -18,7 +18,7 @@ import numpy as np
 
 from tpvp.config import RowConfig
 from tpvp.errors import PointCloudError
-from tpvp.inflation import inflate_voxels
+from tpvp.inflation.inflate import inflate_voxels
 from tpvp.path.route import ROW_ROUTES
 from tpvp.pipeline.result import PlanResult
 from tpvp.pipeline.surface import planning_visibility
@@ -26,7 +26,7 @@ from tpvp.pipeline.timing import timed
 from tpvp.path.tsp import TspConfig
 from tpvp.registration.methods import register
 from tpvp.setcover.methods import Selection, SelectionProblem, select_views
-from tpvp.viewspace import ViewSpace
+from tpvp.viewspace.space import ViewSpace
 from tpvp.viewspace.lookat import CandidateViews
 from tpvp.viewspace.priors import PriorContext, candidate_views
 

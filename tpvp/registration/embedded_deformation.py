@@ -77,73 +77,12 @@ from tpvp.errors import ConfigError, GraphTooLargeError, PointCloudError, checke
 from tpvp.io.units import MM_EXTENT_THRESHOLD
 from tpvp.metrics.geometry import chamfer_distance
 from tpvp.numba_tools import JIT
+from tpvp.registration.config import EDConfig
 from tpvp.registration.warp_field import too_many_nodes
 from tpvp.scene import voxels
 
 # Clouds whose largest sides differ by more than this factor are assumed to be in different units.
 _UNIT_RATIO = 50.0
-
-
-@dataclass(frozen=True)
-class EDConfig:
-    """Parameters of :func:`register_embedded_deformation` (defaults: the paper / authors' code).
-
-    node_coverage: graph voxel size r_graph (m). k_edges: graph neighbours per node.
-    k_anchors: nodes blended per point. anchor_sigma_factor: sigma = factor * node_coverage.
-    chamfer_samples: points drawn from P~ and from Q per iteration (also the Laplacian subset).
-    chamfer_truncation: squared distance (m^2) from which a Chamfer term is zeroed.
-    stop_loss: stop when the total loss falls below this. max_nodes: refuse larger graphs (units).
-    threads: torch CPU threads of the torch-autograd reference
-        (:mod:`tpvp.registration.autograd_reference`; None: leave torch's setting; 2 threads were
-        up to 5x slower than 1 on a 2-core machine). The registration itself runs numpy and serial
-        numba kernels and never imports torch.
-    """
-
-    node_coverage: float = 0.004
-    k_edges: int = 8
-    k_anchors: int = 4
-    anchor_sigma_factor: float = 1.5
-    iterations: int = 300
-    lr: float = 1e-3
-    lr_decay: float = 0.999
-    w_arap: float = 1.0
-    w_chamfer: float = 0.1
-    w_laplacian: float = 0.01
-    laplacian_in_gradient: bool = False
-    laplacian_k: int = 8
-    chamfer_samples: int = 1000
-    chamfer_truncation: float = 0.3
-    stop_loss: float = 1e-7
-    max_nodes: int = 100_000
-    seed: int = 0
-    threads: int | None = 1
-
-    def __post_init__(self):
-        for name in ("node_coverage", "anchor_sigma_factor", "lr", "chamfer_truncation"):
-            v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and np.isfinite(v) and v > 0):
-                raise ConfigError(f"EDConfig.{name} must be a positive number, got {v!r}")
-        for name in ("k_edges", "k_anchors", "chamfer_samples", "laplacian_k", "max_nodes"):
-            v = getattr(self, name)
-            if not (isinstance(v, (int, np.integer)) and not isinstance(v, bool) and v >= 1):
-                raise ConfigError(f"EDConfig.{name} must be an integer >= 1, got {v!r}")
-        if not (isinstance(self.iterations, (int, np.integer)) and not isinstance(self.iterations, bool)
-                and self.iterations >= 0):
-            raise ConfigError(f"EDConfig.iterations must be an integer >= 0, got {self.iterations!r}")
-        if not (np.isfinite(self.lr_decay) and 0 < self.lr_decay <= 1):
-            raise ConfigError(f"EDConfig.lr_decay must be in (0, 1], got {self.lr_decay!r}")
-        for name in ("w_arap", "w_chamfer", "w_laplacian", "stop_loss"):
-            v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and np.isfinite(v) and v >= 0):
-                raise ConfigError(f"EDConfig.{name} must be a number >= 0, got {v!r}")
-        if self.threads is not None and not (isinstance(self.threads, int) and self.threads >= 1):
-            raise ConfigError(f"EDConfig.threads must be an integer >= 1 or None, got {self.threads!r}")
-        if not isinstance(self.seed, (int, np.integer)):
-            raise ConfigError(f"EDConfig.seed must be an integer, got {self.seed!r}")
-
-    @property
-    def anchor_sigma(self) -> float:
-        return self.anchor_sigma_factor * self.node_coverage
 
 
 @dataclass(frozen=True)

@@ -82,6 +82,7 @@ from scipy.spatial import cKDTree
 from tpvp.errors import ConfigError, GraphTooLargeError, PointCloudError, checked_cloud
 from tpvp.io.units import MM_EXTENT_THRESHOLD
 from tpvp.metrics.geometry import chamfer_distance
+from tpvp.registration.config import WarpFieldConfig
 from tpvp.scene import voxels
 
 
@@ -94,90 +95,6 @@ def too_many_nodes(nodes: int, limit: int, spacing: float, prefix: str, spacing_
             f"(planning frame), more than the limit of {limit:,}: raise the limit, e.g. --set "
             f"{prefix}.max_nodes={math.ceil(nodes / step) * step} (more memory and time), or coarsen the graph, "
             f"e.g. --set {prefix}.{spacing_key}={coarser:.2g}")
-
-
-SOLVERS = ("lu-cg", "cg", "direct")
-CORRESPONDENCES = ("previous-to-coarse", "coarse-to-previous", "both")
-
-
-@dataclass(frozen=True)
-class WarpFieldConfig:
-    """Parameters of :func:`register_warp_field`; defaults = the values hard-coded in the authors'
-    ``cilantro_nicp/src/core/Registration.cpp``.
-
-    node_spacing: grid cell of the control nodes (m). anchors: nodes blended per point, Gaussian
-    sigma = anchor_sigma_factor x node_spacing (0.075 m). regularisation_neighbours: k of the node
-    graph *including the node itself* (k - 1 arcs per node), sigma = regularisation_sigma_factor x
-    node_spacing (0.45 m). stiffness: regularisation weight; huber: Huber boundary on each parameter
-    difference. max_correspondence: pairs this far apart or farther are ignored (m).
-    correspondences: the search direction, ``previous-to-coarse`` (every point of the previous
-    session P to its nearest point of the coarse cloud Q: the authors' setup, cilantro's default)
-    or ``coarse-to-previous`` (every point of Q to its nearest warped point of P: the unseen parts
-    of P get no data term, so a partial Q no longer pulls them onto what was seen; an unchanged row
-    stays put) or ``both``.
-    normal_neighbours: k of the target normals. icp_* / gn_* / cg_*: iteration limits and stop
-    tolerances (see the module docstring). solver: ``lu-cg`` (CG preconditioned by a reused LU),
-    ``cg`` (Eigen's Jacobi CG, as cilantro) or ``direct`` (an LU per system).
-    voxel: both clouds reduced to voxel centroids at this size first (m; None: as given).
-    centre: rotate about the source centroid instead of the world origin (not the reference).
-    max_nodes: refuse larger graphs (units). workers: KD-tree query threads (-1: all cores).
-    """
-
-    node_spacing: float = 0.15
-    anchors: int = 4
-    anchor_sigma_factor: float = 0.5
-    regularisation_neighbours: int = 8
-    regularisation_sigma_factor: float = 3.0
-    stiffness: float = 2000.0
-    huber: float = 0.01
-    max_correspondence: float = 0.5
-    normal_neighbours: int = 30
-    icp_iterations: int = 15
-    icp_tolerance: float = 2.5e-3
-    gn_iterations: int = 10
-    gn_tolerance: float = 5e-4
-    correspondences: str = "previous-to-coarse"
-    solver: str = "lu-cg"
-    cg_iterations: int = 500
-    cg_tolerance: float = 1e-5
-    voxel: float | None = 0.01
-    centre: bool = False
-    max_nodes: int = 100_000
-    workers: int = -1
-
-    def __post_init__(self):
-        positive = ("node_spacing", "anchor_sigma_factor", "regularisation_sigma_factor", "huber",
-                    "max_correspondence", "icp_tolerance", "gn_tolerance", "cg_tolerance")
-        for name in positive + (("voxel",) if self.voxel is not None else ()):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not (0 < v < float("inf")):
-                raise ConfigError(f"WarpFieldConfig.{name} must be a positive number, got {v!r}")
-        if isinstance(self.stiffness, bool) or not isinstance(self.stiffness, (int, float)) \
-                or not (0 <= self.stiffness < float("inf")):
-            raise ConfigError(f"WarpFieldConfig.stiffness must be a number >= 0, got {self.stiffness!r}")
-        for name, low in (("anchors", 1), ("regularisation_neighbours", 1), ("normal_neighbours", 3),
-                          ("icp_iterations", 0), ("gn_iterations", 1), ("cg_iterations", 1), ("max_nodes", 1)):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < low:
-                raise ConfigError(f"WarpFieldConfig.{name} must be an integer >= {low}, got {v!r}")
-        if self.correspondences not in CORRESPONDENCES:
-            raise ConfigError(f"WarpFieldConfig.correspondences must be one of {', '.join(CORRESPONDENCES)}, "
-                              f"got {self.correspondences!r}")
-        if self.solver not in SOLVERS:
-            raise ConfigError(f"WarpFieldConfig.solver must be one of {', '.join(SOLVERS)}, got {self.solver!r}")
-        if not isinstance(self.centre, bool):
-            raise ConfigError(f"WarpFieldConfig.centre must be true or false, got {self.centre!r}")
-        w = self.workers
-        if isinstance(w, bool) or not isinstance(w, int) or not (w >= 1 or w == -1):
-            raise ConfigError(f"WarpFieldConfig.workers must be an integer >= 1 or -1 (all cores), got {w!r}")
-
-    @property
-    def anchor_sigma(self) -> float:
-        return self.anchor_sigma_factor * self.node_spacing
-
-    @property
-    def regularisation_sigma(self) -> float:
-        return self.regularisation_sigma_factor * self.node_spacing
 
 
 @dataclass(frozen=True)

@@ -17,7 +17,7 @@ from tpvp.errors import ConfigError, PointCloudError, checked_cloud
 from tpvp.scene import voxels
 from tpvp.scene.normalise import normalise_plant, up_rotation
 from tpvp.scene.organs import reduced_organs
-from tpvp.viewspace import get_view_space
+from tpvp.viewspace.space import get_view_space
 
 NATIVE_RADIUS = 0.4  # m around the real plant when scale = native and no radius is given
 
@@ -30,7 +30,7 @@ class PlanningFrame:
 
     reference: object  # tpvp.scene.normalise.PlantScene of the reference scan
     up: np.ndarray  # (3, 3) scan axes -> +Z up
-    view_space: object  # tpvp.viewspace.ViewSpace in the planning frame
+    view_space: object  # tpvp.viewspace.space.ViewSpace in the planning frame
     sensor: object  # SensorConfig in the planning frame
 
     @property

@@ -13,9 +13,8 @@ import numpy as np
 
 from tpvp.errors import ConfigError
 from tpvp.scene import voxels
+from tpvp.scene.config import ORGANS
 
-#: The organ classes, their codes being their positions.
-ORGANS = ("unknown", "stem", "leaf", "petiole", "peduncle", "flower", "fruit")
 CODE = {name: code for code, name in enumerate(ORGANS)}
 #: What a source's labels mean -> its label -> organ class (``None``: a rule, see :func:`organ_codes`).
 LABEL_KINDS = {

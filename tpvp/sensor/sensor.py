@@ -7,37 +7,14 @@ every number compared with the paper) and ``pixel`` (one ray per pixel, like a r
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-
 import numpy as np
 
-from tpvp.errors import ConfigError, SensorError
+from tpvp.errors import SensorError
 from tpvp.numba_tools import run_workers
 from tpvp.scene.grid import OccupancyGrid
 from tpvp.sensor import kernels
-from tpvp.sensor.camera import D435, Intrinsics, look_at_rotation
-
-MODELS = ("reference", "pixel")
-ROW_RANGE = 2.0  # m, sensor range of the greenhouse-row setting (the rooms' view spaces, the oracle, the sweeps)
-
-
-@dataclass(frozen=True)
-class SensorConfig:
-    """Measurement model and its parameters (defaults: single-plant setting of the paper)."""
-
-    model: str = "reference"
-    max_range: float = 1.0  # m; ROW_RANGE in greenhouse rows
-    pixel_stride: int = 1  # pixel model only
-    intrinsics: Intrinsics = field(default=D435)
-
-    def __post_init__(self):
-        if self.model not in MODELS:
-            raise ConfigError(f"unknown sensor model {self.model!r}; choose one of {', '.join(MODELS)}")
-        if not (self.max_range > 0):
-            raise ConfigError(f"max_range must be > 0 m, got {self.max_range!r}")
-        if int(self.pixel_stride) < 1:
-            raise ConfigError(f"pixel_stride must be a positive integer, got {self.pixel_stride!r}")
-
+from tpvp.sensor.camera import look_at_rotation
+from tpvp.sensor.config import ROW_RANGE, SensorConfig
 
 ROW_SENSOR = SensorConfig(max_range=ROW_RANGE)  # the reference model at the rows' range
 

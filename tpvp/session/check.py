@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from tpvp import __version__
-from tpvp.config import flatten_keys, load_config, to_dict
+from tpvp.config_loading import flatten_keys, load_config, to_dict
 from tpvp.errors import InputFileError, TpvpError
 from tpvp.io import atomic_write_text
 from tpvp.io.plan import PlanFileError, read_plan_values

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from tpvp import __version__
-from tpvp.config import config_yaml, load_config
+from tpvp.config_loading import config_yaml, load_config
 from tpvp.errors import BusyError, ConfigError, InputFileError, PointCloudError, TpvpError, checked_cloud
 from tpvp.io import atomic_write_bytes, atomic_write_text, write_point_cloud
 from tpvp.io.publish import hold_folder, staged_folder

@@ -26,7 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
-from tpvp.config import PlantConfig, with_overrides
+from tpvp.config import PlantConfig
+from tpvp.config_loading import with_overrides
 from tpvp.errors import ConfigError
 from tpvp.io import atomic_write_bytes
 from tpvp.nbv.methods import start_nbv

@@ -15,7 +15,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from tpvp.config import RowConfig, with_overrides
+from tpvp.config import RowConfig
+from tpvp.config_loading import with_overrides
 from tpvp.errors import ConfigError
 from tpvp.pipeline.row import RowKnown, check_row, plan
 from tpvp.scene import voxels

@@ -30,29 +30,12 @@ import numpy as np
 from scipy import sparse
 
 from tpvp.errors import ConfigError
-from tpvp.solvers import check_solver_settings, highspy_module, solve_with_cbc_log
+from tpvp.setcover.config import SetCoverConfig
+from tpvp.solvers import highspy_module, solve_with_cbc_log
 
 # Cap on the entries of one chunk of the (sets x sets) intersection-count product; bounds memory of
 # the dominance test on large instances.
 _PRODUCT_CHUNK_NNZ = 20_000_000
-
-
-@dataclass(frozen=True)
-class SetCoverConfig:
-    """Solver settings.
-
-    The reference implementation stops Gurobi after 10 s (docs/single_plant.md#set-cover); here
-    the default limit is generous so that realistic instances finish with a proof of optimality.
-    Pass ``time_limit=10.0`` to mimic the reference.
-    """
-
-    solver: str = "cbc"  # "cbc" (PuLP's bundled CBC) or "highs" (highspy)
-    time_limit: float = 60.0  # seconds for the ILP solve
-    threads: int = 1  # one thread keeps the selection deterministic
-    reduce: bool = True  # apply the exact reductions before solving
-
-    def __post_init__(self):
-        check_solver_settings(self.solver, self.time_limit, self.threads)
 
 
 @dataclass(frozen=True, eq=False)

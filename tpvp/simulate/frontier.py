@@ -14,7 +14,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from tpvp.config import PlantConfig, with_overrides
+from tpvp.config import PlantConfig
+from tpvp.config_loading import with_overrides
 from tpvp.errors import ConfigError
 from tpvp.simulate.optimum import optimum
 from tpvp.simulate.single_plant import Scene, known, run_case, transfer

@@ -3,7 +3,7 @@ today's plant, the baseline beside the individual-plant experiment's results and
 (:mod:`tpvp.simulate.frontier`): the same executed initial view, then on the ground-truth
 visibility restricted to the oracle voxels
 
-* target 1.0: the minimum set cover (:func:`tpvp.setcover.solve_set_cover`);
+* target 1.0: the minimum set cover (:func:`tpvp.setcover.ilp.solve_set_cover`);
 * target < 1: the fewest further views that, with the initial view, see ``ceil(target x |oracle|)``
   oracle voxels: one partial set-cover ILP (:func:`tpvp.setcover.partial.partial_set_cover`);
 

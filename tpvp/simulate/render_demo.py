@@ -21,7 +21,7 @@ from tpvp.scene.grid import plant_grid
 from tpvp.scene.normalise import normalise_plant
 from tpvp.scene.samples import load_sample
 from tpvp.sensor.sensor import SensorConfig, depth_image
-from tpvp.viewspace import load_view_space
+from tpvp.viewspace.single_plant import load_view_space
 from tpvp.visibility import coverage_ratio, oracle_voxels, visibility_matrix
 from tpvp.viz.figures import plot_depth_images
 

@@ -12,7 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
-from tpvp.config import RowConfig, make_config
+from tpvp.config import RowConfig
+from tpvp.config_loading import make_config
 from tpvp.errors import InputFileError
 from tpvp.io import read_point_cloud
 from tpvp.scene.boxes import ROOMS, room_config

@@ -33,7 +33,7 @@ class Scene:
     previous: np.ndarray
     current: np.ndarray
     grid: object  # OccupancyGrid of the current ground truth (plant + table)
-    view_space: object  # tpvp.viewspace.ViewSpace
+    view_space: object  # tpvp.viewspace.space.ViewSpace
     sensor: object  # SensorConfig in the planning frame
     truth_visibility: object  # csr (V, voxels): what each view observes on the ground truth
     oracle: np.ndarray

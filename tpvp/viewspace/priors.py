@@ -44,7 +44,7 @@ class PriorContext:
 
 def candidate_views(prior: str, context: PriorContext, targets, seed: int = 0) -> CandidateViews:
     """The candidate views of ``prior``; ``targets`` holds ``count`` and ``rounds``
-    (``tpvp.config.RowTargetsConfig``)."""
+    (``tpvp.viewspace.config.RowTargetsConfig``)."""
     return LOOK_AT_PRIORS.get(prior)(context, targets, seed)
 
 

@@ -11,7 +11,7 @@ from tpvp.viewspace.space import get_view_space
 
 def load_view_space(name_or_path: str | Path = "hemisphere", radius: float | None = None) -> np.ndarray:
     """Camera positions ``(V, 3)`` in metres relative to the plant centre (see
-    :func:`tpvp.viewspace.get_view_space` for the names). ``radius`` moves the positions onto a
+    :func:`tpvp.viewspace.space.get_view_space` for the names). ``radius`` moves the positions onto a
     sphere of that radius around their look-at (the bundled files use 0.4 m)."""
     space = get_view_space(name_or_path)
     if radius is not None:

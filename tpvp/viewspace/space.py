@@ -17,7 +17,7 @@ import numpy as np
 from tpvp.errors import ConfigError, InputFileError
 from tpvp.registry import Registry
 from tpvp.scene.boxes import ROOMS, RoomConfig, room_config
-from tpvp.sensor.sensor import ROW_RANGE
+from tpvp.sensor.config import ROW_RANGE
 from tpvp.viewspace.tammes import generate_view_space
 
 DATA = Path(__file__).resolve().parent.parent / "data" / "view_spaces"
