@@ -96,7 +96,7 @@ def selection_on_prediction(scene, config, shared, surface, target: float, overr
     target ``target`` applied to the planning ``surface`` as it is (``planning_miss_ratio = 1``),
     executed views included; ``overrides``: more configuration keys."""
     from tpvp.simulate.single_plant import known
-    from tpvp.pipeline.plant import selection_problem
+    from tpvp.pipeline.plan import selection_problem
     from tpvp.setcover.methods import select_views
     from tpvp.visibility import coverage_ratio, covered_voxels
 
@@ -110,7 +110,7 @@ def selection_on_prediction(scene, config, shared, surface, target: float, overr
 def _calibrate_case(case, targets, overrides) -> list[dict]:
     from tpvp.simulate.optimum import optimum
     from tpvp.simulate.single_plant import build_scene, known, transfer
-    from tpvp.pipeline.plant import planning_surface
+    from tpvp.pipeline.plan import planning_surface
     from tpvp.inflation.weights import surface_area, surface_classes
     from tpvp.pipeline.jit import compile_kernels
 

@@ -23,7 +23,7 @@ from __future__ import annotations
 import argparse
 import time
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -31,13 +31,14 @@ import pandas as pd
 
 from tpvp.config_loading import make_config
 from tpvp.simulate.greenhouse import build_row_scene, row_transfer
-from tpvp.pipeline.row import candidate_visibility
+from tpvp.pipeline.plan import inflated, row_view_space
+from tpvp.pipeline.surface import planning_visibility
 from tpvp.simulate.row_cases import RowCase
 from tpvp.io import atomic_write_text
 from tpvp.pipeline.jit import compile_kernels
 from tpvp.metrics.views import forced_views, views_per_voxel
 from tpvp.scene import voxels
-from tpvp.setcover.methods import select_views
+from tpvp.setcover.methods import SelectionProblem, select_views
 from tpvp.viewspace.priors import candidate_views
 from results_file import write_results
 
@@ -54,6 +55,31 @@ def depth_behind_front(box, aisle_centre, centres, resolution: float) -> np.ndar
     front = np.full(column.max() + 1, -np.inf)
     np.maximum.at(front, column.ravel(), across)
     return front[column.ravel()] - across
+
+
+@dataclass(frozen=True)
+class _Visibility:
+    """The passive views, then the candidates, on a planning surface at one covering voxel."""
+
+    grid: object
+    view_space: object
+    matrix: object
+    n_passive: int
+    resolution: float
+
+    @property
+    def planning_voxels(self) -> int:
+        return self.grid.size
+
+    def problem(self, coverage_target: float) -> SelectionProblem:
+        return SelectionProblem(self.matrix, tuple(range(self.n_passive)), self.view_space, self.grid.centres,
+                                coverage_target)
+
+
+def _visibility(room, candidates, points, resolution: float, sensor) -> _Visibility:
+    space = row_view_space(room, candidates, sensor)
+    grid, matrix = planning_visibility(points, resolution, space.positions, space.look_ats, sensor)
+    return _Visibility(grid, space, matrix, len(room.initial_positions), resolution)
 
 
 def _instance(visibility, selection_config, depth) -> dict:
@@ -93,17 +119,18 @@ def measure_case(room: str, pair: int, reference: str, resolutions, cache=None) 
     config = case.config(make_config("row"))
     scene = build_row_scene(*case.load(), config, date=case.date, cache_dir=cache)
     transferred = row_transfer(scene, config)
-    context = scene.known.prior_context(config.inflation.step, transferred)
+    inflation = inflated(scene.known, config, transferred)
+    context = scene.known.prior_context(config.inflation.step, transferred.alignment.warped, inflation.inflation)
     ours = candidate_views("transfer", context, config.targets, config.seed)
     authors = candidate_views("authors-transfer", context, config.targets, config.seed)
-    surfaces = {"planning surface": transferred.inflation.planning, "aligned previous only": transferred.alignment.warped}
+    surfaces = {"planning surface": inflation.planning, "aligned previous only": transferred.alignment.warped}
     rows = []
     for resolution in resolutions:
         for (candidates_name, candidates) in (("ours", ours), ("authors' PriorTemporal", authors)):
             for surface_name, points in surfaces.items():
                 if candidates_name != "ours" and surface_name != "planning surface":
                     continue
-                visibility = candidate_visibility(scene.room, candidates, points, resolution, config.sensor)
+                visibility = _visibility(scene.room, candidates, points, resolution, config.sensor)
                 occupied = len(voxels.voxelise(points, resolution))
                 targets = len(np.unique(candidates.target_ids)) if len(candidates.target_ids) else 0
                 rows.append({"room": room, "pair": pair, "reference": reference, "cover_cm": round(100 * resolution),

@@ -99,7 +99,7 @@ def calibration_rows(case, targets=TARGETS, margins=MARGINS) -> list:
     from tpvp.simulate.optimum import optimum
     from tpvp.simulate.single_plant import build_scene, known, run_case, transfer
     from tpvp.pipeline.jit import compile_kernels
-    from tpvp.pipeline.plant import planning_surface
+    from tpvp.pipeline.plan import planning_surface
     from tpvp.scene.organs import CODE
 
     compile_kernels()

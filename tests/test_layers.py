@@ -123,7 +123,7 @@ def test_the_graph_holds_what_a_plan_loads_by_name(loads):
     assert "tpvp.learning.methods" in loads["tpvp.registry"]
     drawings = references(ROOT / "tpvp" / "pipeline" / "outputs.py")
     assert {"tpvp.viz.figures", "tpvp.viz.recording", "tpvp.viz.rows"} <= drawings <= loads["tpvp.pipeline.outputs"]
-    code = ("import sys; import tpvp.pipeline.plant, tpvp.pipeline.row, tpvp.pipeline.outputs; "
+    code = ("import sys; import tpvp.pipeline.plan, tpvp.pipeline.outputs; "
             "from tpvp.registry import load_reference; from tpvp.nbv.methods import NBV_METHODS; "
             "from tpvp.setcover.methods import SELECTION_METHODS; NBV_METHODS.names(); SELECTION_METHODS.names(); "
             "[load_reference(r + ':__name__') for r in sys.argv[1:]]; "
@@ -132,7 +132,7 @@ def test_the_graph_holds_what_a_plan_loads_by_name(loads):
                          check=True, cwd=ROOT)
     loaded = set(out.stdout.split())
     assert {"tpvp.learning.methods", *drawings} <= loaded
-    sources = ["tpvp.pipeline.plant", "tpvp.pipeline.row", "tpvp.pipeline.outputs"]
+    sources = ["tpvp.pipeline.plan", "tpvp.pipeline.outputs"]
     assert loaded - reachable(loads, sources) == set()
     assert "tpvp.learning.methods" not in reachable({m: t - {"tpvp.learning.methods"} for m, t in loads.items()},
                                                     sources)
@@ -144,26 +144,24 @@ def test_the_planner_cannot_reach_the_ground_truth(report, loads):
     it the same kind of object."""
     from dataclasses import fields
 
-    from tpvp.pipeline.plant import Known
-    from tpvp.pipeline.row import RowKnown
+    from tpvp.pipeline.plan import Known
 
     planners = [module for module in report.graph if module.startswith("tpvp.pipeline")]
-    assert {"tpvp.pipeline.plant", "tpvp.pipeline.row", "tpvp.pipeline.outputs"} <= set(planners)
+    assert {"tpvp.pipeline.plan", "tpvp.pipeline.outputs"} <= set(planners)
     for module in planners:
         path = chain(loads, module, TRUTH, without={KNOWN_LEAK})
         assert path == [], " -> ".join(path)
     # the planner does reach the plugin modules: the check above walks through them
-    assert chain(loads, "tpvp.pipeline.plant", ["tpvp.learning.methods"]) != []
+    assert chain(loads, "tpvp.pipeline.plan", ["tpvp.learning.methods"]) != []
     truth_fields = {"current", "grid", "oracle", "truth_visibility", "passive_visibility", "passive_seen"}
-    for known in (Known, RowKnown):
-        assert truth_fields.isdisjoint(f.name for f in fields(known)), known
+    assert truth_fields.isdisjoint(f.name for f in fields(Known))
 
 
 @pytest.mark.xfail(strict=True, reason="issue 47 finding: tpvp.learning.planners (the learned methods' module, "
                    "loaded by the planner through the plugin tpvp.learning.methods) imports tpvp.learning.dataset, "
                    "which imports tpvp.synthetic.plants")
 def test_a_learned_method_loads_no_simulator(loads):
-    assert chain(loads, "tpvp.pipeline.plant", TRUTH) == []
+    assert chain(loads, "tpvp.pipeline.plan", TRUTH) == []
 
 
 def test_a_real_session_reaches_no_simulator(report, loads):
@@ -262,7 +260,7 @@ def test_a_plan_made_with_the_truth_sealed_is_the_simulation_s_plan():
     from tpvp.config_loading import make_config
     from tpvp.simulate.single_plant import build_scene, known, run_case
     from tpvp.nbv.warm_up import warm_up
-    from tpvp.pipeline.plant import plan, transfer
+    from tpvp.pipeline.plan import plan, transfer
     from tpvp.scene.samples import load_sample
 
     config = make_config("plant")

@@ -192,7 +192,7 @@ def test_organ_targets_hold_through_re_planning(labelled_scene):
 
 
 def test_a_named_organ_s_target_holds_its_neighbours_when_stricter():
-    from tpvp.pipeline.plant import organ_groups
+    from tpvp.pipeline.plan import organ_groups
 
     keys = np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0], [0, 1, 0], [5, 5, 5]])
     organs = np.array([CODE["fruit"], CODE["leaf"], CODE["leaf"], CODE["stem"], CODE["leaf"]])

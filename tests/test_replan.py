@@ -15,7 +15,7 @@ from tpvp.errors import ConfigError
 from tpvp.simulate.single_plant import build_scene, known, run_case, transfer
 from tpvp.simulate.robot_camera import StandInCamera
 from tpvp.nbv.methods import start_nbv
-from tpvp.pipeline.plant import plan, planning_surface
+from tpvp.pipeline.plan import plan, planning_surface
 from tpvp.pipeline.replan import AGREEMENT_VOXELS, Prediction, disagreement, prediction_of, replan
 from tpvp.scene import voxels
 from tpvp.scene.samples import load_sample
@@ -94,8 +94,8 @@ def test_a_replanned_run_executes_every_view_once_and_ends_with_nothing_left(pai
         return {int(i) for view in views for i in truth.indices[truth.indptr[view]:truth.indptr[view + 1]]}
 
     assert result.coverage == len(seen_by(result.order)) / len(seeable)
-    assert result.coverage_warm_up == len(seen_by(result.executed_views)) / len(seeable)
-    assert result.coverage > result.coverage_warm_up
+    assert result.coverage_captured == len(seen_by(result.executed_views)) / len(seeable)
+    assert result.coverage > result.coverage_captured
     assert "replanning" in result.timings
 
 

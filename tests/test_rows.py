@@ -123,15 +123,15 @@ def test_oracle_is_cached_on_disk_by_scene_and_configuration(scene, tmp_path):
 
 def test_ours_plans_executes_and_beats_random_selection_at_equal_views(scene):
     result = greenhouse.run_row_case(scene, QUICK)
-    assert result.n_views == 15 + len(result.selected) and result.selection.optimal
-    assert result.coverage_passive < result.coverage <= 1.0
+    assert result.n_views == 15 + len(result.planned_views) and result.selection.optimal
+    assert result.coverage_captured < result.coverage <= 1.0
     assert result.path_length == pytest.approx(result.path.length + scene.room.passive_cost)
     assert result.path.gap <= QUICK.path.band_gap + 1e-9
     # the executed views are the path's order of the selected candidates, each candidate once
-    assert len(np.unique(result.selected)) == len(result.selected)
+    assert len(np.unique(result.planned_views)) == len(result.planned_views)
     candidates = greenhouse.row_candidates(scene, "transfer", QUICK, result.transfer)
     truth = greenhouse.candidate_truth(scene, candidates)
-    random = [greenhouse.random_selection(scene, candidates, truth, len(result.selected), r, QUICK)
+    random = [greenhouse.random_selection(scene, candidates, truth, len(result.planned_views), r, QUICK)
               for r in range(3)]
     assert result.coverage > max(r["coverage"] for r in random)
     assert greenhouse.upper_limit(scene, truth) >= greenhouse.row_coverage(scene, greenhouse.execute(
@@ -346,7 +346,7 @@ def test_a_new_candidate_source_and_route_are_one_registration_each(scene):
         heights = result.positions[:, 2]
         if (heights < split).any():
             assert heights[0] < split  # the toy route visits the lower band first
-        assert result.coverage_passive < result.coverage <= 1.0
+        assert result.coverage_captured < result.coverage <= 1.0
         with pytest.raises(ConfigError, match="unknown row route 'nowhere'; choose one of band, open, toy-lower-first"):
             with_overrides(QUICK, {"route": "nowhere"})
     finally:
@@ -355,10 +355,10 @@ def test_a_new_candidate_source_and_route_are_one_registration_each(scene):
 
 
 def test_the_open_route_is_one_band(scene):
-    from tpvp.pipeline.row import plan_path
+    from tpvp.path.route import row_path
 
     positions = scene.room.candidate_positions[::40]
-    band, _ = plan_path(scene.room, positions, QUICK.path)
-    one, length = plan_path(scene.room, positions, QUICK.path, route="open")
+    band, _ = row_path(scene.room, positions, QUICK.path)
+    one, length = row_path(scene.room, positions, QUICK.path, route="open")
     assert len(one.bands[1]) == 0 and sorted(one.order) == sorted(band.order) == list(range(len(positions)))
     assert length == pytest.approx(one.length + scene.room.passive_cost)

@@ -13,7 +13,7 @@ from tpvp.config_loading import load_config
 from tpvp.errors import ConfigError
 from tpvp.experiments.season import SEASON_COLUMNS, prior_missing, run_season
 from tpvp.nbv.warm_up import warm_up
-from tpvp.pipeline.plant import Known, plan, transfer
+from tpvp.pipeline.plan import Known, plan, transfer
 from tpvp.simulate.world import build_scene
 from tpvp.synthetic.plants import generate_growth_series, generate_plant
 
@@ -69,8 +69,8 @@ def test_a_season_equals_its_sessions_chained_by_hand(series):
             prior = series[day - 1] if arm == "truth" else own
             scene = build_scene(prior, series[day], CONFIG)
             nbv = warm_up(scene, CONFIG)
-            robot = Known(scene.previous, scene.view_space, scene.sensor, scene.plant_from_scan, scene.table_points,
-                          scene.names, scene.reduction or {}, scene.previous_organs)
+            robot = Known(scene.previous, scene.sensor, scene.names, scene.view_space, scene.plant_from_scan,
+                          scene.table_points, scene.reduction or {}, scene.previous_organs)
             result = plan(robot, CONFIG, transfer(robot, CONFIG, nbv))
             order = [*nbv.executed, *result.planned_views]
             truth = sparse.csr_matrix(scene.truth_visibility)
@@ -157,7 +157,7 @@ def test_a_row_season_chains_its_sessions_from_its_own_reconstruction(tmp_path):
     from tpvp.config_loading import make_config
     from tpvp.experiments import season
     from tpvp.simulate.row_cases import QUICK
-    from tpvp.pipeline.row import plan as plan_row
+    from tpvp.pipeline.plan import plan as plan_row
     from tpvp.visibility import safe_visibility
 
     case = season.RowSeasonCase("room1", 0, sessions=3)
@@ -176,7 +176,7 @@ def test_a_row_season_chains_its_sessions_from_its_own_reconstruction(tmp_path):
         seen = set(scene.passive_seen.tolist()) | set(executed.indices.tolist())
         oracle = set(scene.oracle.tolist())
         assert (s.row["views"], s.row["path_length_m"]) == (planned.n_views, planned.path_length)
-        assert planned.n_views == len(scene.room.initial_positions) + len(planned.selected)
+        assert planned.n_views == len(scene.room.initial_positions) + len(planned.planned_views)
         assert s.row["coverage"] == len(seen & oracle) / len(oracle)
         # what it fused is one point in each voxel it saw, the passive sweep's included
         fused_ids = scene.grid.ids_of(np.floor(s.fused / scene.grid.resolution).astype(np.int64))

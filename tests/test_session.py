@@ -88,7 +88,7 @@ def test_a_row_session_plans_what_the_simulator_plans(tmp_path, kind):
     assert np.array_equal(planned.positions, simulated.positions)
     assert np.array_equal(planned.look_ats, simulated.look_ats)
     assert abs(planned.path_length - simulated.path_length) <= 1e-9
-    assert session.request().role == f"planned view 1 of {len(simulated.selected)}"
+    assert session.request().role == f"planned view 1 of {len(simulated.planned_views)}"
     assert Session.problems(tmp_path / "session") == []  # a row's plan record and files read as `check` reads them
 
 

@@ -128,7 +128,7 @@ def test_on_a_generated_plant_the_curve_ends_at_the_plan_coverage():
     curve = species.coverage_curve(scene.truth_visibility, scene.oracle, item.order)
     assert curve["view"].tolist() == result.executed_views + result.planned_views
     assert curve["coverage"].iloc[-1] == pytest.approx(result.coverage, abs=1e-15)
-    assert curve["coverage"].iloc[len(result.executed_views) - 1] == pytest.approx(result.coverage_warm_up, abs=1e-15)
+    assert curve["coverage"].iloc[len(result.executed_views) - 1] == pytest.approx(result.coverage_captured, abs=1e-15)
     assert curve["new_voxels"].sum() == curve["covered"].iloc[-1]
     row = species.plan_row(item)
     assert row["ours_views"] == result.n_views == len(curve)

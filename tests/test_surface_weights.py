@@ -12,7 +12,7 @@ from tpvp.config import PlantConfig
 from tpvp.config_loading import make_config
 from tpvp.setcover.config import CALIBRATED_MISS_RATIO, SelectionConfig
 from tpvp.errors import ConfigError
-from tpvp.pipeline.plant import PlanningSurface, selection_problem
+from tpvp.pipeline.plan import PlanningSurface, selection_problem
 from tpvp.inflation.weights import (SURFACE_CLASSES, SurfaceWeightsConfig, surface_area, surface_classes,
                                    surface_weights)
 from tpvp.scene import voxels
@@ -143,8 +143,8 @@ def test_selection_problem_weights_only_below_a_target_of_one():
     below it, with the weights enabled, the class weights; unweighted by default."""
     classes = np.array([0, 1, 2, 3, 0], dtype=np.int8)
     area = np.array([1, 2, 3, 4, 1])
-    surface = PlanningSurface(None, SimpleNamespace(centres=np.zeros((5, 3))), sparse.csr_matrix((4, 5)), classes, area,
-                              {})
+    surface = PlanningSurface(None, None, SimpleNamespace(centres=np.zeros((5, 3))), sparse.csr_matrix((4, 5)), {},
+                              classes=classes, area=area)
     transferred = SimpleNamespace(executed=[0], nbv=None)
     scene = SimpleNamespace(view_space=None)
     full = selection_problem(scene, PlantConfig(), transferred, surface)

@@ -159,7 +159,7 @@ def resolved_config(args, source=None, extra=None):
     config = load_config(source, {**(extra or {}), **config_overrides(args)})
 
     if config.setting == "plant":  # a row has no initial view: its passive sweep starts it
-        get_view_space(config.view_space).view_index(config.initial_view)  # refuse before any work
+        config.space.view_index(config.initial_view)  # refuse before any work
     return config
 
 

@@ -37,8 +37,24 @@ PAPER_NOISE_LEVELS = ((0.0, 0.0), (0.002, 0.5), (0.005, 1.0), (0.01, 2.0))  # Ta
 ICP_METHODS = ("point_to_plane", "point_to_point")
 
 
+class _ResolvedViewSpace:
+    """A setting's view space as an object (``space``), resolved from its name or file once per
+    configuration: when the configuration is made (:mod:`tpvp.config_loading`), or at first use
+    for one made by hand or by ``dataclasses.replace``."""
+
+    @property
+    def space(self):
+        space = self.__dict__.get("_space")
+        if space is None:
+            from tpvp.viewspace.space import get_view_space  # a view space is resolved at load, not at import
+
+            space = get_view_space(self.view_space)
+            object.__setattr__(self, "_space", space)  # a cache beside the fields: not compared, not written
+        return space
+
+
 @dataclass(frozen=True)
-class PlantConfig:
+class PlantConfig(_ResolvedViewSpace):
     """Individual-plant setting (the paper's Tables I-IV); defaults = the ``paper`` configuration.
 
     gt_resolution: ground-truth voxel (m); derived resolutions follow it (docs/configuration.md).
@@ -75,9 +91,7 @@ class PlantConfig:
         """Whether the scene has a table: ``scene.table`` if set, else the view space's choice."""
         if self.scene.table is not None:
             return bool(self.scene.table)
-        from tpvp.viewspace.space import get_view_space  # the view spaces load only when a table is asked for
-
-        return get_view_space(self.view_space).table
+        return self.space.table
 
 
 @dataclass(frozen=True)
@@ -175,7 +189,7 @@ class PoseNoiseConfig:
 
 
 @dataclass(frozen=True)
-class RowConfig:
+class RowConfig(_ResolvedViewSpace):
     """Greenhouse-row setting (the paper's Tables V-VII); defaults = the ``paper-row`` configuration.
 
     view_space: the room (``room1``, ``room4``; its boxes, candidate positions and passive sweep

@@ -61,13 +61,15 @@ DERIVED = {
 }
 
 
-def _view_space_range(spec) -> float:
+def _view_space_range(spec, config=None) -> float:
+    """The range of the view space ``spec``; given the ``config`` it belongs to, resolved there once
+    (``config.space``)."""
     from tpvp.viewspace.space import get_view_space  # a view space is resolved at load, not at import
 
     if not isinstance(spec, str):
         raise ConfigError(f"configuration key 'view_space': expected a name or a file path, got {spec!r}")
     try:
-        return float(get_view_space(spec).max_range)
+        return float((get_view_space(spec) if config is None else config.space).max_range)
     except (ConfigError, InputFileError) as exc:
         raise ConfigError(f"configuration key 'view_space': {exc}") from None
 
@@ -202,7 +204,7 @@ def _check_methods(config) -> None:
                               f"choose one of {', '.join(registry.names())}")
     if isinstance(config, RowConfig):
         _check_row_names(config)
-    _view_space_range(config.view_space)
+    _view_space_range(config.view_space, config)
 
 
 def _check_row_names(config) -> None:

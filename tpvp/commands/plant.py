@@ -30,14 +30,14 @@ def _print_case(result, summary, folder, compile_seconds, pieces):
                                                 result.organ_coverage.items()))] if result.organ_coverage else []),
             ("path length", f"{result.path_length:.2f} m (planning frame; "
                             f"{summary['path_length_scan_m']:.3f} m in the scan frame)"),
-            ("coverage after warm-up", f"{100 * result.coverage_warm_up:.2f} %"),
+            ("coverage after warm-up", f"{100 * result.coverage_captured:.2f} %"),
             ("Chamfer transferred vs coarse", f"{summary['chamfer_before_mm']:.2f} -> "
                                               f"{summary['chamfer_after_mm']:.2f} mm (planning frame)"),
             ("view selection", f"{len(result.planned_views)} views, optimal={result.selection.optimal}"
              + (f", {result.set_cover.n_dropped_infeasible} unreachable voxels dropped"
                 if hasattr(result.set_cover, "n_dropped_infeasible") else f"; {result.selection.status}")),
             ("time: warm-up / registration", f"{result.timings['warm_up']:.2f} s / {result.timings['registration']:.2f} s"),
-            ("time: planning (inflation..path)", f"{result.timings['planning']:.2f} s"),
+            ("time: planning (registration..path)", f"{result.timings['planning']:.2f} s"),
             ("time: numba compile / cache load", f"{compile_seconds:.2f} s (kernels: {', '.join(pieces)}; "
                                                  "not part of the run)")]
     rows += [(f"re-plan {i}", step.line()) for i, step in enumerate(result.replans, 1)]

@@ -74,12 +74,12 @@ def _greenhouse(args) -> int:
         write_row_case_outputs(stage.folder, scene, result, config, case.name, pool=pool)
     rows = [("views (15 passive included)", f"{result.n_views}"),
             ("coverage of the oracle set", f"{100 * result.coverage:.2f} % (passive sweep alone "
-                                           f"{100 * result.coverage_passive:.2f} %)"),
+                                           f"{100 * result.coverage_captured:.2f} %)"),
             ("path length", f"{result.path_length:.2f} m (passive sweep {scene.room.passive_cost:.2f} m included; "
                             f"band path gap to its lower bound {100 * result.path.gap:.2f} %)"),
             ("Chamfer transferred vs coarse", f"{1e3 * result.transfer.alignment.chamfer_before:.2f} -> "
                                               f"{1e3 * result.transfer.alignment.chamfer_after:.2f} mm"),
-            ("view selection", f"{len(result.selected)} of {len(result.candidates)} candidates, "
+            ("view selection", f"{len(result.planned_views)} of {len(result.candidates)} candidates, "
                                f"optimal={result.selection.optimal}"),
             ("time: oracle", f"{scene.timings['oracle']:.1f} s" + (" (from the cache)" if scene.oracle_cached else "")),
             ("time: registration / planning", f"{result.timings['registration']:.2f} s / {result.timings['planning']:.2f} s")]

@@ -111,7 +111,7 @@ class InflationAblation:
     ``only_without``: views only that plan selects; ``seen_only_with`` / ``seen_only_without``:
     ground-truth (oracle) voxel ids that plan's views see and the other plan's views miss.
     """
-    with_inflation: object  # CaseResult
+    with_inflation: object  # PlanResult
     without_inflation: object
     resolution: float
     surface_keys: np.ndarray
@@ -227,7 +227,7 @@ class RegistrationSetting:
     transfer: object  # tpvp.simulate.single_plant.Transfer
     error: np.ndarray  # (N,) nearest distance of each warped point to today's plant
     chamfer_truth: float  # symmetric Chamfer distance of the warped model to today's plant (m, Table IV)
-    plans: dict  # "with inflation" / "without inflation" -> CaseResult
+    plans: dict  # "with inflation" / "without inflation" -> PlanResult
 
     @property
     def coarse(self) -> np.ndarray:

@@ -230,12 +230,12 @@ def warm_up_rank(scene, executed) -> dict:
 def _case_row(result, scene, config) -> dict:
     return {"views": result.n_views, "coverage": result.coverage, "path_length_m": result.path_length,
             **{f"coverage_{organ}": value for organ, value in result.organ_coverage.items()},
-            "coverage_after_warm_up": result.coverage_warm_up, **warm_up_rank(scene, result.executed_views),
+            "coverage_after_warm_up": result.coverage_captured, **warm_up_rank(scene, result.executed_views),
             **_optimum_for_coverage(scene, result, config),
             "chamfer_before_mm": 1e3 * result.chamfer_before, "chamfer_after_mm": 1e3 * result.chamfer_after,
             # Table IV: the transferred model against the current ground-truth surface
             "chamfer_truth_mm": 1e3 * chamfer_distance(result.clouds["warped"], scene.current),
-            "optimal": bool(result.selection.optimal and result.tsp.optimal), "status": result.selection.status,
+            "optimal": bool(result.selection.optimal and result.path.optimal), "status": result.selection.status,
             "seconds_planning": result.timings["planning"],
             "seconds_total": sum(result.timings[k] for k in ("warm_up", "registration", "planning"))}
 

@@ -30,8 +30,9 @@ the ``pose_noise`` section of the row configuration):
   de-duplicated on a ``fusion_voxel`` grid (0.002 m; the first point of each voxel is kept, points
   are never averaged, so misaligned copies stay visible as ghosts - averaging would hide part of
   the error that the study measures).
-* **ICP.** Open3D point-to-plane ICP (``icp_method``) of each active view against the passive map,
-  both downsampled at ``icp_voxel`` (0.01 m, the ground-truth voxel; Open3D centroids), target
+* **ICP.** Point-to-plane ICP (``icp_method``; :mod:`tpvp.registration.icp`, Open3D's algorithm,
+  deterministic) of each active view against the passive map,
+  both downsampled at ``icp_voxel`` (0.01 m, the ground-truth voxel; voxel centroids), target
   normals from a hybrid search (radius 3 voxels, 30 neighbours). Coarse to fine, starting at the
   nominal pose: ``icp_max_iterations`` (10) iterations at each maximum correspondence distance of
   ``icp_max_correspondence`` (0.05, 0.02, 0.01 m; the first admits the 2-3 cm displacement of the
@@ -61,6 +62,8 @@ from scipy.spatial import cKDTree
 
 from tpvp.config import PoseNoiseConfig
 from tpvp.errors import ConfigError, checked_cloud
+from tpvp.metrics import geometry
+from tpvp.registration import icp
 from tpvp.scene import voxels
 from tpvp.scene.grid import OccupancyGrid
 from tpvp.sensor import kernels
@@ -68,7 +71,6 @@ from tpvp.sensor.sensor import ROW_SENSOR, SensorConfig, check_camera, observe_p
 
 _NORMAL_RADIUS_VOXELS = 3.0
 _NORMAL_NEIGHBOURS = 30
-_CROP_SLACK = 0.10  # m a view may move during ICP beyond the correspondence distance
 
 
 # ============================================================================ noise
@@ -236,57 +238,32 @@ def passive_map(grid: OccupancyGrid, positions, look_ats, sensor: SensorConfig =
 
 
 # ============================================================================ ICP
-def _o3d():
-    import open3d as o3d  # heavy import, only when ICP is used
-
-    return o3d
-
-
-def prepare_icp_target(passive_points, config: PoseNoiseConfig = PoseNoiseConfig()):
-    """The passive map as an Open3D cloud downsampled at ``icp_voxel`` (with normals for
-    point-to-plane ICP); pass it to :func:`refine_icp` to build it once for many views."""
-    o3d = _o3d()
-    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(checked_cloud(passive_points, "passive map")))
-    cloud = cloud.voxel_down_sample(config.icp_voxel)
-    if config.icp_method == "point_to_plane":
-        cloud.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(
-            radius=_NORMAL_RADIUS_VOXELS * config.icp_voxel, max_nn=_NORMAL_NEIGHBOURS))
-    return cloud
+def prepare_icp_target(passive_points, config: PoseNoiseConfig = PoseNoiseConfig()) -> icp.Target:
+    """The passive map downsampled at ``icp_voxel`` (voxel centroids), with normals for
+    point-to-plane ICP and its KD-tree; pass it to :func:`refine_icp` to build it once for many views."""
+    radius = _NORMAL_RADIUS_VOXELS * config.icp_voxel if config.icp_method == "point_to_plane" else None
+    return icp.prepare_target(checked_cloud(passive_points, "passive map"), config.icp_voxel, radius,
+                              _NORMAL_NEIGHBOURS)
 
 
 def refine_icp(view_points_world, passive_points, config: PoseNoiseConfig = PoseNoiseConfig()):
     """Light rigid ICP of one view (world points at its nominal pose) against the passive map.
 
-    ``passive_points``: an ``(N, 3)`` array or the cloud of :func:`prepare_icp_target`. Returns
+    ``passive_points``: an ``(N, 3)`` array or the target of :func:`prepare_icp_target`. Returns
     ``(transform, fitness, accepted)``: the 4x4 correction to apply to the view's points (identity
-    unless accepted), the final fitness, and whether it reached ``icp_min_fitness``.
+    unless accepted), the final fitness, and whether it reached ``icp_min_fitness``. The ICP is
+    :func:`tpvp.registration.icp.icp` (deterministic: the same input gives the same bits).
     """
-    o3d = _o3d()
-    target = passive_points if isinstance(passive_points, o3d.geometry.PointCloud) else (
-        prepare_icp_target(passive_points, config))
+    target = passive_points if isinstance(passive_points, icp.Target) else prepare_icp_target(passive_points, config)
     view = np.asarray(view_points_world, dtype=np.float64).reshape(-1, 3)
-    source = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(view)).voxel_down_sample(config.icp_voxel)
-    if len(source.points) < 3 or len(target.points) < 3:
+    source = icp.voxel_downsample(view, config.icp_voxel)
+    if len(source) < 3 or len(target.points) < 3:
         return np.eye(4), 0.0, False
-    # Only the passive map near the view can match: Open3D builds a KD-tree of the target in
-    # every call, so a cropped target (margin: the largest correspondence distance plus 10 cm of
-    # motion) makes each call several times faster without changing its correspondences.
-    margin = max(config.icp_max_correspondence) + _CROP_SLACK
-    lo, hi = view.min(axis=0) - margin, view.max(axis=0) + margin
-    target = target.crop(o3d.geometry.AxisAlignedBoundingBox(lo, hi))
-    if len(target.points) < 3:
-        return np.eye(4), 0.0, False
-    reg = o3d.pipelines.registration
-    estimation = (reg.TransformationEstimationPointToPlane() if config.icp_method == "point_to_plane"
-                  else reg.TransformationEstimationPointToPoint())
-    criteria = reg.ICPConvergenceCriteria(max_iteration=int(config.icp_max_iterations))
-    transform = np.eye(4)
-    for distance in config.icp_max_correspondence:
-        result = reg.registration_icp(source, target, distance, transform, estimation, criteria)
-        transform = np.array(result.transformation)
-    fitness = float(result.fitness)
+    result = icp.icp(source, target, config.icp_max_correspondence, method=config.icp_method,
+                     max_iteration=int(config.icp_max_iterations))
+    fitness = result.fitness
     accepted = fitness >= config.icp_min_fitness and fitness > 0
-    return (transform if accepted else np.eye(4)), fitness, bool(accepted)
+    return (result.transformation if accepted else np.eye(4)), fitness, bool(accepted)
 
 
 def _apply(transform, points):
@@ -300,17 +277,18 @@ def _tau_label(tau: float) -> str:
 
 def geometry_metrics(points, truth, taus=(0.01, 0.02)) -> dict:
     """Chamfer (mm) and precision / recall / F1 (fractions) per tau of ``points`` against ``truth``
-    (an ``(M, 3)`` array or a prebuilt ``scipy.spatial.cKDTree`` of it)."""
+    (an ``(M, 3)`` array or a prebuilt ``scipy.spatial.cKDTree`` of it), by
+    :mod:`tpvp.metrics.geometry` with one nearest-neighbour search each way."""
     truth_tree = truth if isinstance(truth, cKDTree) else cKDTree(checked_cloud(truth, "ground truth"))
     points = checked_cloud(points, "fused cloud")
-    to_truth = truth_tree.query(points)[0]
-    to_points = cKDTree(points).query(truth_tree.data)[0]
-    out = {"chamfer_mm": 1000.0 * 0.5 * (to_truth.mean() + to_points.mean())}
+    to_truth = geometry.nearest_distances(points, truth_tree)
+    to_points = geometry.nearest_distances(truth_tree.data, points)
+    out = {"chamfer_mm": 1000.0 * geometry.chamfer_from_distances(to_truth, to_points)}
     for tau in taus:
-        p, r = float((to_truth <= tau).mean()), float((to_points <= tau).mean())
+        score = geometry.f_score_from_distances(to_truth, to_points, tau)
         label = _tau_label(tau)
-        out[f"precision_{label}"], out[f"recall_{label}"] = p, r
-        out[f"f1_{label}"] = 0.0 if p + r == 0 else 2 * p * r / (p + r)
+        out[f"precision_{label}"], out[f"recall_{label}"] = score.precision, score.recall
+        out[f"f1_{label}"] = score.f1
     return out
 
 
@@ -343,9 +321,9 @@ def pose_noise_study(truth_points, grid: OccupancyGrid, passive_points, active_p
     tasks = [(t, r, d) for t, r in config.levels for d in range(1 if t == 0 and r == 0 else config.draws)]
     rows = []
     for sigma_t, sigma_r, draw in tqdm(tasks, desc="pose noise", unit="draw", disable=not progress):
-        for icp, fused in noisy_reconstructions(grid, positions, rotations, passive_points, sigma_t, sigma_r, draw,
+        for with_icp, fused in noisy_reconstructions(grid, positions, rotations, passive_points, sigma_t, sigma_r, draw,
                                                 config, sensor, target).items():
-            row = {"sigma_t_m": sigma_t, "sigma_r_deg": sigma_r, "draw": draw, "icp": icp,
+            row = {"sigma_t_m": sigma_t, "sigma_r_deg": sigma_r, "draw": draw, "icp": with_icp,
                    "n_points": len(fused["cloud"])}
             row.update(geometry_metrics(fused["cloud"], truth_tree, config.taus))
             row.update({k: fused[k] for k in ("icp_accepted", "icp_fitness", "drift_mm", "seconds")})
@@ -366,16 +344,16 @@ def noisy_reconstructions(grid: OccupancyGrid, positions, rotations, passive_poi
     noisy = sigma_t > 0 or sigma_r_deg > 0
     base = time.perf_counter() - start
     out = {}
-    for icp in (config.icp if noisy else (False,)):
+    for with_icp in (config.icp if noisy else (False,)):
         t0 = time.perf_counter()
         views, accepted, fitness = fused, 0, float("nan")
-        if icp:
+        if with_icp:
             icp_target = icp_target if icp_target is not None else prepare_icp_target(passive_points, config)
             results = [refine_icp(v, icp_target, config) for v in fused]
             views = [_apply(T, v) if ok else v for v, (T, _, ok) in zip(fused, results)]
             accepted = sum(ok for _, _, ok in results)
             fitness = float(np.mean([f for _, f, _ in results])) if results else float("nan")
-        out[icp] = {"cloud": _fuse_views(views, passive_points, config.fusion_voxel), "icp_accepted": accepted,
+        out[with_icp] = {"cloud": _fuse_views(views, passive_points, config.fusion_voxel), "icp_accepted": accepted,
                     "icp_fitness": fitness, "drift_mm": _drift_mm(views, rendered),
                     "seconds": base + time.perf_counter() - t0}
     return out

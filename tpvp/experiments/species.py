@@ -40,7 +40,7 @@ class Showcase:
     case: object  # tpvp.experiments.plants.Case
     config: object  # PlantConfig of the case
     scene: object  # tpvp.simulate.single_plant.Scene
-    result: object  # tpvp.pipeline.plant.CaseResult
+    result: object  # tpvp.pipeline.plan.PlanResult
 
     @property
     def order(self) -> list:
@@ -68,7 +68,7 @@ def plan_row(item: Showcase, with_optimum: bool = True) -> dict:
     result = item.result
     row = {"species": item.case.instance.species, "view_space": item.case.view_space,
            "ours_views": result.n_views, "ours_planned_views": len(result.planned_views),
-           "coverage_after_warm_up_pct": 100 * result.coverage_warm_up, "ours_coverage_pct": 100 * result.coverage,
+           "coverage_after_warm_up_pct": 100 * result.coverage_captured, "ours_coverage_pct": 100 * result.coverage,
            "path_length_m": result.path_length, **occlusion_summary(item.scene.truth_visibility, item.scene.oracle)}
     if with_optimum:
         row["optimum_views_100pct"] = int(optimum(item.scene, item.config, targets=(1.0,))["views"].iloc[0])

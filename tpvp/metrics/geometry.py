@@ -11,8 +11,15 @@ from tpvp.errors import ConfigError, checked_cloud
 
 
 def nearest_distances(source, target) -> np.ndarray:
-    """Distance from every source point to its nearest target point."""
-    return cKDTree(checked_cloud(target, "target cloud")).query(checked_cloud(source, "source cloud"), workers=-1)[0]
+    """Distance from every source point to its nearest target point. ``target``: an ``(M, 3)`` array
+    or a prebuilt ``cKDTree`` of it (to query one large cloud many times without rebuilding it)."""
+    tree = target if isinstance(target, cKDTree) else cKDTree(checked_cloud(target, "target cloud"))
+    return tree.query(checked_cloud(source, "source cloud"), workers=-1)[0]
+
+
+def chamfer_from_distances(a_to_b, b_to_a) -> float:
+    """Symmetric Chamfer distance from the two directed nearest-neighbour distance arrays."""
+    return 0.5 * (np.asarray(a_to_b).mean() + np.asarray(b_to_a).mean())
 
 
 def chamfer_distance(a, b) -> float:
@@ -21,7 +28,7 @@ def chamfer_distance(a, b) -> float:
     This is the convention of the paper's tables (mm there); the registration loss uses squared
     distances instead.
     """
-    return 0.5 * (nearest_distances(a, b).mean() + nearest_distances(b, a).mean())
+    return chamfer_from_distances(nearest_distances(a, b), nearest_distances(b, a))
 
 
 @dataclass(frozen=True)
@@ -36,7 +43,14 @@ def f_score(reconstruction, ground_truth, threshold: float) -> FScore:
     converse; F1 their harmonic mean."""
     if not threshold > 0:
         raise ConfigError(f"F-score threshold must be > 0 m, got {threshold!r}")
-    precision = float((nearest_distances(reconstruction, ground_truth) <= threshold).mean())
-    recall = float((nearest_distances(ground_truth, reconstruction) <= threshold).mean())
+    return f_score_from_distances(nearest_distances(reconstruction, ground_truth),
+                                  nearest_distances(ground_truth, reconstruction), threshold)
+
+
+def f_score_from_distances(to_truth, to_reconstruction, threshold: float) -> FScore:
+    """:func:`f_score` from the directed distances (reconstruction -> truth, truth -> reconstruction),
+    to score several thresholds with one pair of nearest-neighbour searches."""
+    precision = float((np.asarray(to_truth) <= threshold).mean())
+    recall = float((np.asarray(to_reconstruction) <= threshold).mean())
     f1 = 0.0 if precision + recall == 0 else 2 * precision * recall / (precision + recall)
     return FScore(precision, recall, f1)

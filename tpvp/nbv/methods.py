@@ -133,5 +133,5 @@ def make_nbv(context: NbvContext):
 def start_nbv(scene, config):
     """The configured NBV method on ``scene``'s view space and sensor, nothing executed yet (its
     ``prior`` is the previous session in the planning frame): a simulator scene or what a real
-    session knows (:class:`tpvp.pipeline.plant.Known`)."""
+    session knows (:class:`tpvp.pipeline.plan.Known`)."""
     return make_nbv(NbvContext(scene.view_space, np.zeros(3), scene.sensor, config.nbv, prior=scene.previous))

@@ -46,3 +46,21 @@ def band_route(positions, split_height: float, start_position, config: TspConfig
 def open_route(positions, split_height: float, start_position, config: TspConfig) -> BandPathResult:
     lowest = float(np.min(np.asarray(positions, dtype=np.float64).reshape(-1, 3)[:, 2], initial=np.inf))
     return band_path(positions, split_height=lowest, start_position=start_position, config=config)
+
+
+def row_path(room, positions, config: TspConfig = TspConfig(), with_passive: bool = True, route: str = "band"):
+    """The path over the views in ``room`` by ``route`` (:data:`ROW_ROUTES`; bands split at the
+    view box's mid height), from where the passive sweep ends when it ran; returns the path result
+    and the reported length (sweep included)."""
+    split = float(room.view_box.center[2])
+    start = np.asarray(room.initial_positions[-1]) if with_passive else None
+    result = ROW_ROUTES.get(route)(positions, split, start, config)
+    return result, result.length + (room.passive_cost if with_passive else 0.0)
+
+
+def row_path_warnings(path, config: TspConfig) -> list[str]:
+    """A warning when the band path stopped above its target gap to the lower bound."""
+    if path.gap > config.band_gap:
+        return [f"band path ends {100 * path.gap:.1f} % above its lower bound (target {100 * config.band_gap:g} %) "
+                f"after {config.band_seconds:g} s per band"]
+    return []

@@ -69,7 +69,7 @@ def plan_frames(known, order, roles) -> tuple[dict, dict, dict]:
 
 def write_plan_outputs(folder, known, result, config, name: str = "case", extra_summary: dict | None = None,
                        measured: Measured | None = None, pool=None) -> dict:
-    """A plant plan (:class:`tpvp.pipeline.plant.CaseResult` planned on ``known``): results (JSON +
+    """A plant plan (:class:`tpvp.pipeline.plan.PlanResult` planned on ``known``): results (JSON +
     CSV), the plan in both frames, ``config.yaml`` + ``provenance.json``, the plan figure and a
     rerun ``.rrd`` in ``folder``. Without ``measured`` the plan figure shows what was captured.
     The figures and the recording are drawn in ``pool`` (:func:`tpvp.viz.background.drawing_pool`)
@@ -120,7 +120,7 @@ def write_plan_outputs(folder, known, result, config, name: str = "case", extra_
 
 def write_row_plan_outputs(folder, known, result, config, name: str = "row case", extra_summary: dict | None = None,
                            measured: Measured | None = None, pool=None) -> dict:
-    """A row plan (:class:`tpvp.pipeline.row.RowCaseResult` planned on ``known``): results (JSON +
+    """A row plan (:class:`tpvp.pipeline.plan.PlanResult` planned on ``known``): results (JSON +
     CSV), the plan (passive sweep then the planned views, world frame), ``config.yaml`` +
     ``provenance.json``, the path from the top and the side, and a rerun ``.rrd`` (drawn in ``pool``
     when one is given)."""
@@ -128,11 +128,11 @@ def write_row_plan_outputs(folder, known, result, config, name: str = "row case"
     room = known.room
     positions = np.concatenate([room.initial_positions, result.positions])
     look_ats = np.concatenate([room.initial_look_ats, result.look_ats])
-    roles = ["passive"] * len(room.initial_positions) + ["planned"] * len(result.selected)
+    roles = ["passive"] * len(room.initial_positions) + ["planned"] * len(result.planned_views)
     quaternions = np.array([rotation_to_quaternion(r) for r in look_at_rotations(positions, look_ats)]).reshape(-1, 4)
     table = plan_table(positions, look_ats, quaternions, roles)
     table.insert(1, "candidate_position", [-1] * len(room.initial_positions)
-                 + result.candidates.position_ids[result.selected].tolist())
+                 + result.candidates.position_ids[result.planned_candidates].tolist())
     plans = write_plan(folder, {"world": table}, {"world": f"{room.room} world frame (the room's boxes; metres)"})
     summary = {"name": name, "configuration": config.name, "room": room.room,
                "cover_resolution_m": config.selection.cover_resolution, **(measured.summary if measured else {}),
@@ -150,7 +150,7 @@ def write_row_plan_outputs(folder, known, result, config, name: str = "row case"
         ("tpvp.viz.recording:write_recording", (folder / "recording.rrd",), dict(
             clouds={**truth, "previous": (known.previous, (220, 60, 60)), "coarse": (transfer.coarse, (40, 90, 220)),
                     "transferred": (transfer.alignment.warped, (230, 140, 30)),
-                    "inflation": (transfer.inflation.inflation, (40, 180, 60))},
+                    "inflation": (result.clouds["inflation"], (40, 180, 60))},
             cameras={"passive_views": (room.initial_positions, room.initial_look_ats),
                      "planned_views": (result.positions, result.look_ats)},
             paths={"band_path": np.concatenate([room.initial_positions[-1:], result.positions])}))], pool)

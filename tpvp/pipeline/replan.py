@@ -25,7 +25,7 @@ from scipy import sparse
 from tpvp.path.local import obstacle_radius
 from tpvp.path.route import path_along
 from tpvp.path.tsp import PathResult
-from tpvp.pipeline.plant import Known, plan, planning_surface, selection_problem, transfer
+from tpvp.pipeline.plan import Known, plan, planning_surface, selection_problem, transfer
 from tpvp.scene import voxels
 from tpvp.setcover.methods import Selection, cover_requirement
 
@@ -95,7 +95,7 @@ class Replan:
 
 
 def prediction_of(surface, views_so_far: int) -> Prediction:
-    """The prediction of a :class:`~tpvp.pipeline.plant.PlanningSurface` planned with
+    """The prediction of a :class:`~tpvp.pipeline.plan.PlanningSurface` planned with
     ``views_so_far`` views executed."""
     grid = surface.grid
     return Prediction(grid.centres, float(grid.resolution), sparse.csr_matrix(surface.visibility), int(views_so_far))
@@ -160,7 +160,7 @@ def _reaches(problem, views) -> tuple[bool, float]:
 def replan(known: Known, config, nbv, warm_up: int, planned, prediction: Prediction, progress=None):
     """Re-plan the rest of ``planned`` (the plan's views in order, after ``warm_up`` warm-up views)
     from every capture ``nbv`` holds (the warm-up's, then the planned views'). Returns the new
-    :class:`~tpvp.pipeline.plant.CaseResult` (its executed views: the warm-up; its planned views:
+    :class:`~tpvp.pipeline.plan.PlanResult` (its executed views: the warm-up; its planned views:
     those captured, in capture order, then the remaining ones), its :class:`Prediction` and the
     :class:`Replan` row. With captures that agree with ``prediction`` the remaining plan stands."""
     started = time.perf_counter()
@@ -188,7 +188,7 @@ def replan(known: Known, config, nbv, warm_up: int, planned, prediction: Predict
                          "kept: the remaining plan " + ("agrees with the captures" if agree
                                                         else "still reaches the planning target"), 0.0)
         result = replace(result, planned_views=remaining, path_length=length, selection=kept,
-                         tsp=PathResult(np.arange(len(remaining) + 1), length, False, 0.0, "kept"))
+                         path=PathResult(np.arange(len(remaining) + 1), length, False, 0.0, "kept"))
     order = [int(v) for v in result.planned_views]
     _, share = _reaches(problem, order)
     row = Replan(len(executed), unexpected, contradicted, share, len(remaining), len(order),

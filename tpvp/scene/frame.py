@@ -1,4 +1,5 @@
-"""The planning frame of a session pair, and what the robot knows of the previous session in it.
+"""The planning frame of a session pair, and what the robot knows of the previous session in it
+(a row's frame is its room's: :func:`check_row` refuses a row that is not where its room expects it).
 
 Shared by the simulator (:mod:`tpvp.simulate.world`) and a real session (:mod:`tpvp.session.plant`):
 both fix the frame with :func:`planning_frame` and reduce the previous scan with
@@ -17,9 +18,10 @@ from tpvp.errors import ConfigError, PointCloudError, checked_cloud
 from tpvp.scene import voxels
 from tpvp.scene.normalise import normalise_plant, up_rotation
 from tpvp.scene.organs import reduced_organs
-from tpvp.viewspace.space import get_view_space
 
 NATIVE_RADIUS = 0.4  # m around the real plant when scale = native and no radius is given
+MIN_INSIDE_PLANT_BOX = 0.5  # a row whose points lie mostly outside its room's plant box is in another frame
+BOX_TOLERANCE = 0.10  # m: leaves may overhang the plant box a little
 
 
 @dataclass(frozen=True, eq=False)
@@ -61,7 +63,7 @@ def planning_frame(reference_scan, config, name: str = "reference scan") -> Plan
     reference = normalise_plant(scan, config.scene.largest_side, config.scene.rotation_deg,
                                 centre=config.scene.centre, table=config.uses_table, name=name,
                                 table_size=config.scene.table_size, table_resolution=config.scene.table_resolution)
-    space, sensor = get_view_space(config.view_space), config.sensor
+    space, sensor = config.space, config.sensor
     if config.scene.scale == "native":
         # The plant keeps its size: the view sphere and the sensor range are real metres, so in the
         # planning frame they scale with the plant like every resolution does.
@@ -98,3 +100,17 @@ def check_plant_voxels(name: str, points, count: int, config) -> None:
             f"{name}: only {count} occupied {1e3 * config.gt_resolution:g} mm voxels once the plant is "
             f"scaled to a {config.scene.largest_side:g} m largest side ({len(points)} points); a plant scan "
             f"has at least {config.scene.min_plant_voxels} - is this the right file?")
+
+
+def check_row(points, name: str, room) -> None:
+    """Refuse a row that is not where its room expects it (outside the plant box, or in the view box)."""
+    inside = room.plant_box.contains(points, tol=BOX_TOLERANCE)
+    if inside.mean() < MIN_INSIDE_PLANT_BOX:
+        raise PointCloudError(
+            f"{name}: only {100 * inside.mean():.1f} % of its points lie in {room.room}'s plant box "
+            f"(centre {np.round(room.plant_box.center, 3).tolist()} m): the row is outside its room's boxes "
+            f"- is it in the room's frame (metres, aligned to the first capture day)?")
+    in_view_box = room.view_box.contains(points).mean()
+    if in_view_box > 0.05:
+        raise PointCloudError(f"{name}: {100 * in_view_box:.1f} % of its points lie in {room.room}'s view box, "
+                              f"where the camera moves: the row is not where its room expects it")

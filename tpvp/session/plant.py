@@ -31,7 +31,7 @@ from tpvp.config_loading import with_overrides
 from tpvp.errors import ConfigError
 from tpvp.io import atomic_write_bytes
 from tpvp.nbv.methods import start_nbv
-from tpvp.pipeline.plant import Known, plan, planning_surface, transfer
+from tpvp.pipeline.plan import Known, plan, planning_surface, transfer
 from tpvp.pipeline.replan import Prediction, Replan, prediction_of, replan
 from tpvp.scene.frame import known_from_previous, planning_frame
 from tpvp.scene.organs import check_organ_targets
@@ -63,8 +63,8 @@ class PlantSession(Session):
         frame.view_space.view_index(config.initial_view)  # refuse a bad initial view up front
         previous, organs, reduction = known_from_previous(frame.to_planning(previous_scan), config, name,
                                                           self.previous_organs)
-        return Known(previous, frame.view_space, frame.sensor, frame.plant_from_scan, frame.reference.table_points,
-                     (name, "today's captures"), reduction, organs)
+        return Known(previous, frame.sensor, (name, "today's captures"), frame.view_space, frame.plant_from_scan,
+                     frame.reference.table_points, reduction, organs)
 
     def views(self) -> tuple[np.ndarray, np.ndarray]:
         space = self.scene.view_space
@@ -114,7 +114,7 @@ class PlantSession(Session):
     def plan(self, overrides: dict | None = None, progress=None):
         """Plan on the captures (``overrides``: configuration keys for this plan, e.g. the
         coverage target): writes ``plan/`` as ``tpvp plan`` writes its folder (the world frame is
-        the scan frame) and returns the :class:`~tpvp.pipeline.plant.CaseResult` (its
+        the scan frame) and returns the :class:`~tpvp.pipeline.plan.PlanResult` (its
         coverages are NaN: there is no ground truth). After captures of a plan's views, the rest
         is re-planned from them (the result's ``replans`` end with this one)."""
         config = with_overrides(self.config, overrides or {})

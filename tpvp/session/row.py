@@ -6,7 +6,7 @@ capture; ``plan`` runs the row pipeline on what was captured (warp-field registr
 inflation, the transfer look-at prior's candidates, set cover at the covering voxel with the
 passive views as executed, band path from the end of the sweep) and asks for the planned views.
 With the same captures the plan equals the simulator's (:func:`tpvp.simulate.greenhouse.run_row_case`):
-both run :func:`tpvp.pipeline.row.plan`.
+both run :func:`tpvp.pipeline.plan.plan`.
 """
 
 from __future__ import annotations
@@ -18,9 +18,10 @@ import numpy as np
 from tpvp.config import RowConfig
 from tpvp.config_loading import with_overrides
 from tpvp.errors import ConfigError
-from tpvp.pipeline.row import RowKnown, check_row, plan
+from tpvp.pipeline.plan import Known, plan
 from tpvp.scene import voxels
 from tpvp.scene.boxes import room_config
+from tpvp.scene.frame import check_row
 from tpvp.session.check import centroid_file
 from tpvp.session.folder import KINDS, Request, Session
 
@@ -73,7 +74,7 @@ class RowSession(Session):
         box = self.scene.room.plant_box
         return np.all(np.abs(planning - box.center) <= 1.5 * box.half_extent.max(), axis=1)
 
-    def known(self) -> RowKnown:
+    def known(self) -> Known:
         """What the planner knows from the passive captures: the coarse reconstruction (key
         order; per voxel the centroid of the points the first passive view that saw it captured
         there, or the voxel centre: ``config.coarse``) and, per voxel, that view's position."""
@@ -92,12 +93,12 @@ class RowSession(Session):
             if self.config.coarse == "centroids":
                 coarse[at[new]] = np.load(self.folder / centroid_file(record), allow_pickle=False)[new]
         room = self.scene.room
-        return RowKnown(room, self.scene.previous, coarse, room.initial_positions[first], self.config.sensor,
-                        self.scene.names)
+        return Known(self.scene.previous, self.config.sensor, self.scene.names, room=room, coarse=coarse,
+                     passive_cameras=room.initial_positions[first])
 
     def plan(self, overrides: dict | None = None, progress=None):
         """Plan on the passive captures: writes ``plan/`` as ``tpvp greenhouse`` writes its folder
-        and returns the :class:`~tpvp.pipeline.row.RowCaseResult` (coverages NaN)."""
+        and returns the :class:`~tpvp.pipeline.plan.PlanResult` (coverages NaN)."""
         self.check_captured()
         from tpvp.pipeline.outputs import write_row_plan_outputs  # matplotlib, pandas: only a plan writes figures
         config: RowConfig = with_overrides(self.config, overrides or {})
@@ -106,7 +107,7 @@ class RowSession(Session):
         n = self.warm_up_views()
         self.commit_plan(lambda folder: write_row_plan_outputs(folder, known, result, config,
                                                                name=self.folder.name),
-                         {"planned_views": list(range(n, n + len(result.selected))),
+                         {"planned_views": list(range(n, n + len(result.planned_views))),
                           "positions": result.positions.tolist(), "look_ats": result.look_ats.tolist(),
                           "path_length_m": result.path_length})
         return result

@@ -19,7 +19,7 @@ from tpvp.config_loading import with_overrides
 from tpvp.errors import ConfigError
 from tpvp.simulate.optimum import optimum
 from tpvp.simulate.single_plant import Scene, known, run_case, transfer
-from tpvp.pipeline.plant import planning_surface
+from tpvp.pipeline.plan import planning_surface
 from tpvp.io import atomic_write_text
 from tpvp.io.publish import staged_folder
 from tpvp.viz.background import draw

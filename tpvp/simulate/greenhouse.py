@@ -1,7 +1,7 @@
 """One greenhouse-row case of the paper, end to end in the simulator (docs/greenhouse.md).
 
 The passive sweep (15 fixed views) is captured on the current session's ground truth; the planner
-(:mod:`tpvp.pipeline.row`) plans from what the robot knows (``scene.known``: the coarse
+(:mod:`tpvp.pipeline.plan`) plans from what the robot knows (``scene.known``: the coarse
 reconstruction Q and the previous session, never the ground truth); the plan is executed on the
 ground truth, its coverage normalised by the FOV-free oracle (cached on disk). The baselines
 of Tables V-VI (the prior ladder with random selection, each prior's upper limit) reuse the same
@@ -19,10 +19,12 @@ import numpy as np
 
 from tpvp.config import RowConfig
 from tpvp.errors import PointCloudError, checked_cloud
-from tpvp.pipeline.row import RowCaseResult, RowKnown, RowTransfer, check_row, plan, plan_path, transfer
+from tpvp.path.route import row_path
+from tpvp.pipeline.plan import Known, PlanResult, Transfer, inflated, plan, transfer
 from tpvp.pipeline.timing import timed
 from tpvp.scene import voxels
 from tpvp.scene.boxes import room_config
+from tpvp.scene.frame import check_row
 from tpvp.scene.grid import build_grid
 from tpvp.viewspace.lookat import CandidateViews
 from tpvp.viewspace.priors import candidate_views
@@ -34,10 +36,10 @@ from tpvp.visibility.oracle_cache import cached_oracle
 class RowScene:
     """A simulated pair of sessions of one row in the room's (world) frame: what the robot knows
     (``known``: the room, the previous session, the coarse reconstruction Q of the passive sweep and
-    its cameras, the sensor; read through, ``scene.room`` is ``scene.known.room``) and the current
-    session's ground truth, its oracle and the voxel ids the passive sweep saw (``passive_seen``)."""
+    its cameras, the sensor) and the current session's ground truth, its oracle and the voxel ids
+    the passive sweep saw (``passive_seen``)."""
 
-    known: RowKnown
+    known: Known
     current: np.ndarray
     grid: object  # OccupancyGrid of the current ground truth
     oracle: np.ndarray
@@ -45,13 +47,13 @@ class RowScene:
     passive_seen: np.ndarray
     oracle_cached: bool = False
 
-    def __getattr__(self, name):
-        if name.startswith("__") or name == "known":  # copy and pickle probe dunders before known exists
-            raise AttributeError(name)
-        try:
-            return getattr(self.known, name)
-        except AttributeError:
-            raise AttributeError(f"'RowScene' object has no attribute {name!r}") from None
+    # What the simulation reads of what the robot knows (the room's boxes and sweep, the sensor).
+    room = property(lambda self: self.known.room)
+    sensor = property(lambda self: self.known.sensor)
+    previous = property(lambda self: self.known.previous)
+    coarse = property(lambda self: self.known.coarse)
+    names = property(lambda self: self.known.names)
+    timings = property(lambda self: self.known.timings)
 
 
 def build_row_scene(previous_points, current_points, config: RowConfig = RowConfig(),
@@ -91,8 +93,8 @@ def build_row_scene(previous_points, current_points, config: RowConfig = RowConf
         raise PointCloudError(f"{names[1]}: no voxel of the row is visible from {room_cfg.room}'s view box")
     current = voxels.voxel_centroids(current, resolution)
     observed = observed_points(grid, current) if config.coarse == "centroids" else grid.centres
-    known = RowKnown(room_cfg, previous, observed[seen], room_cfg.initial_positions[first_view[seen]], config.sensor,
-                     tuple(names), timings, date)
+    known = Known(previous, config.sensor, tuple(names), room=room_cfg, coarse=observed[seen],
+                  passive_cameras=room_cfg.initial_positions[first_view[seen]], timings=timings, date=date)
     return RowScene(known, current, grid, oracle, passive, seen, from_cache)
 
 
@@ -110,19 +112,22 @@ def observed_points(grid, centroids) -> np.ndarray:
     return np.where(same[:, None], centroids, centres)
 
 
-def row_transfer(scene: RowScene, config: RowConfig = RowConfig(), progress=None) -> RowTransfer:
-    """The planner's registration and inflation (:func:`tpvp.pipeline.row.transfer`) on what the
-    simulated passive sweep saw."""
+def row_transfer(scene: RowScene, config: RowConfig = RowConfig(), progress=None) -> Transfer:
+    """The planner's registration (:func:`tpvp.pipeline.plan.transfer`) on what the simulated
+    passive sweep saw."""
     return transfer(scene.known, config, progress)
 
 
 def row_candidates(scene: RowScene, prior: str, config: RowConfig = RowConfig(),
-                   transferred: RowTransfer | None = None) -> CandidateViews:
+                   transferred: Transfer | None = None) -> CandidateViews:
     """The candidate views of the look-at prior ``prior`` (a name of
     :data:`tpvp.viewspace.priors.LOOK_AT_PRIORS`: ``obb``, ``passive``, ``transfer``, which needs
     ``transferred``, or ``authors-<prior>``, which needs the scene's date), ``config.targets`` of
     them, surface voxel ``config.inflation.step`` (docs/greenhouse.md#look-at-candidates)."""
-    context = scene.known.prior_context(config.inflation.step, transferred)
+    known = scene.known
+    context = (known.prior_context(config.inflation.step) if transferred is None else
+               known.prior_context(config.inflation.step, transferred.alignment.warped,
+                                   inflated(known, config, transferred).inflation))
     return candidate_views(prior, context, config.targets, config.seed)
 
 
@@ -138,7 +143,7 @@ def row_coverage(scene: RowScene, seen_ids, with_passive: bool = True) -> float:
 
 
 def run_row_case(scene: RowScene, config: RowConfig = RowConfig(), progress=None,
-                 transferred: RowTransfer | None = None) -> RowCaseResult:
+                 transferred: Transfer | None = None) -> PlanResult:
     """Ours on one row pair, one block per stage: transfer, the transfer prior's candidates, their
     visibility on the planning surface, set cover with the passive views as executed, band path from
     the end of the passive sweep, execution. ``transferred``: :func:`row_transfer` of this scene."""
@@ -146,7 +151,7 @@ def run_row_case(scene: RowScene, config: RowConfig = RowConfig(), progress=None
     timings = dict(result.timings)
     with timed(timings, "execution", progress or (lambda stage: None), "execution"):
         coverage = row_coverage(scene, execute(scene, result.positions, result.look_ats))
-    return replace(result, coverage=coverage, coverage_passive=row_coverage(scene, []), timings=timings)
+    return replace(result, coverage=coverage, coverage_captured=row_coverage(scene, []), timings=timings)
 
 
 def candidate_truth(scene: RowScene, candidates: CandidateViews):
@@ -168,7 +173,7 @@ def random_selection(scene: RowScene, candidates: CandidateViews, truth, budget:
     rng = np.random.default_rng([config.seed, int(repetition), int(budget)])
     chosen = rng.choice(len(candidates), size=min(int(budget), len(candidates)), replace=False)
     t = time.perf_counter()
-    path, length = plan_path(scene.room, candidates.positions[chosen], config.path, with_passive, config.route)
+    path, length = row_path(scene.room, candidates.positions[chosen], config.path, with_passive, config.route)
     seconds = time.perf_counter() - t
     coverage = row_coverage(scene, covered_voxels(truth, chosen), with_passive)
     n_passive = len(scene.room.initial_positions) if with_passive else 0

@@ -1,7 +1,7 @@
 """One individual-plant case of the paper, end to end in the simulator.
 
 The simulator (:mod:`tpvp.simulate.world`) renders the initial view and the warm-up NBVs on
-today's ground truth; the planner (:mod:`tpvp.pipeline.plant`) plans from what they observed and
+today's ground truth; the planner (:mod:`tpvp.pipeline.plan`) plans from what they observed and
 what the robot knew before (:func:`known`: never the ground truth); the plan is then executed on
 the ground truth and its coverage measured against the oracle set.
 """
@@ -17,8 +17,8 @@ from scipy import sparse
 from tpvp.config import PlantConfig
 from tpvp.nbv.methods import start_nbv
 from tpvp.nbv.warm_up import warm_up
-from tpvp.pipeline.plant import CaseResult, Known, PlanningSurface, Transfer, plan, planning_surface
-from tpvp.pipeline.plant import transfer as transfer_known
+from tpvp.pipeline.plan import PlanResult, Known, PlanningSurface, Transfer, plan, planning_surface
+from tpvp.pipeline.plan import transfer as transfer_known
 from tpvp.pipeline.replan import prediction_of, replan
 from tpvp.scene.organs import organ_shares
 from tpvp.simulate.world import Scene, build_scene  # noqa: F401 (callers build the case's scene here)
@@ -27,8 +27,8 @@ from tpvp.visibility import coverage_ratio, covered_voxels
 
 def known(scene: Scene) -> Known:
     """What the robot knows of a simulated case before it plans: the scene without its ground truth."""
-    return Known(scene.previous, scene.view_space, scene.sensor, scene.plant_from_scan, scene.table_points,
-                 scene.names, scene.reduction or {}, scene.previous_organs)
+    return Known(scene.previous, scene.sensor, scene.names, scene.view_space, scene.plant_from_scan,
+                 scene.table_points, scene.reduction or {}, scene.previous_organs)
 
 
 def added_coverage(scene, executed) -> np.ndarray:
@@ -61,11 +61,11 @@ def transfer(scene: Scene, config: PlantConfig = PlantConfig(), progress=None) -
 
 
 def run_case(scene: Scene, config: PlantConfig = PlantConfig(), progress=None,
-             transferred: Transfer | None = None, surface: PlanningSurface | None = None) -> CaseResult:
+             transferred: Transfer | None = None, surface: PlanningSurface | None = None) -> PlanResult:
     """Warm-up, transfer, plan and execute one case; ``progress(stage)`` is called per stage.
     ``transferred``: the :func:`transfer` of this scene and configuration when already computed
     (methods that differ only after registration share it); ``surface``: likewise its
-    :func:`tpvp.pipeline.plant.planning_surface` (plans that differ only in the selection share it)."""
+    :func:`tpvp.pipeline.plan.planning_surface` (plans that differ only in the selection share it)."""
     transferred = transferred or transfer(scene, config, progress)
     surface = surface or planning_surface(known(scene), config, transferred, progress)
     result = plan(known(scene), config, transferred, progress, surface)
@@ -74,7 +74,7 @@ def run_case(scene: Scene, config: PlantConfig = PlantConfig(), progress=None,
     executed, planned = result.executed_views, result.planned_views
     covered = covered_voxels(scene.truth_visibility, executed + planned)
     return replace(result, coverage=coverage_ratio(covered, scene.oracle),
-                   coverage_warm_up=coverage_ratio(covered_voxels(scene.truth_visibility, executed), scene.oracle),
+                   coverage_captured=coverage_ratio(covered_voxels(scene.truth_visibility, executed), scene.oracle),
                    organ_coverage=organ_coverage(scene, covered))
 
 
@@ -88,8 +88,8 @@ def organ_coverage(scene: Scene, covered) -> dict:
     return shares
 
 
-def execute_replanning(scene: Scene, config: PlantConfig, transferred: Transfer, result: CaseResult,
-                       surface: PlanningSurface, progress=None) -> CaseResult:
+def execute_replanning(scene: Scene, config: PlantConfig, transferred: Transfer, result: PlanResult,
+                       surface: PlanningSurface, progress=None) -> PlanResult:
     """Execute ``result``'s plan on the ground truth ``selection.replan_after`` views at a time,
     re-planning the rest from the captures after each batch (:func:`tpvp.pipeline.replan.replan`),
     until no view is left. The result holds every re-plan's row; its timings add the re-planning."""
