@@ -136,3 +136,34 @@ def test_a_drawing_process_killed_from_outside_is_one_line(tmp_path):
         with pytest.raises(TpvpError, match="the drawing process ended"):
             draw(_calls(tmp_path), pool)
     assert multiprocessing.active_children() == []
+
+
+def test_a_drawing_process_ends_when_its_parent_is_killed(tmp_path):
+    """The drawing process holds no copy of its parent's end of the pipe: a parent killed without
+    closing the pool (SIGKILL, out of memory) leaves no drawing process behind."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+    from pathlib import Path
+
+    code = ("import os, signal\nfrom tpvp.viz.background import drawing_pool\n"
+            "with drawing_pool() as pool:\n    print(pool._process.pid, flush=True)\n"
+            "    os.kill(os.getpid(), signal.SIGKILL)\n")
+    out = tmp_path / "out.txt"
+    with out.open("w") as stream:  # a file, not a pipe: a drawing process left behind would hold a pipe open
+        status = subprocess.run([sys.executable, "-c", code], stdout=stream, stderr=subprocess.STDOUT).returncode
+    assert status == -signal.SIGKILL, out.read_text()
+    pid = int(out.read_text().split()[0])
+    deadline = time.monotonic() + 60  # it loads matplotlib and rerun first, then reads the pipe's end
+    stat = Path(f"/proc/{pid}/stat")
+    while time.monotonic() < deadline:
+        try:
+            if stat.read_text().rsplit(")", 1)[1].split()[0] == "Z":  # ended, not yet reaped
+                return
+        except (FileNotFoundError, ProcessLookupError):
+            return
+        time.sleep(0.1)
+    os.kill(pid, signal.SIGKILL)
+    raise AssertionError("the drawing process outlived its killed parent")

@@ -33,7 +33,8 @@ class DrawingPool:
 
     def __init__(self, workers: int):
         self._connection, theirs = _FORK.Pipe()
-        self._process = _FORK.Process(target=_serve, args=(theirs, workers), name="tpvp-drawing")
+        self._process = _FORK.Process(target=_serve, args=(theirs, workers, self._connection),
+                                      name="tpvp-drawing")
         self._process.start()
         theirs.close()
 
@@ -60,7 +61,11 @@ class DrawingPool:
         self._connection.close()
 
 
-def _serve(connection, workers: int) -> None:
+def _serve(connection, workers: int, parents=None) -> None:
+    # The fork copied the parent's end of the pipe too: closed, the parent's end is the parent's
+    # alone, and a parent that ends without closing the pool (killed) ends this process's input.
+    if parents is not None:
+        parents.close()
     # Ctrl-C reaches the parent, which closes the pool; SIGTERM (to the whole group) ends it at once.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
@@ -68,7 +73,7 @@ def _serve(connection, workers: int) -> None:
         importlib.import_module(module)
     _warm_up()
     with ProcessPoolExecutor(workers, mp_context=_FORK) as pool:  # forked from here: nothing to load
-        while (calls := connection.recv()) is not None:
+        while (calls := _receive(connection)) is not None:
             try:
                 answer = (True, [future.result() for future in [pool.submit(_draw, *call) for call in calls]])
             except Exception as exc:  # noqa: BLE001 - raised again by the parent (a full disk stays an OSError)
@@ -77,6 +82,15 @@ def _serve(connection, workers: int) -> None:
                 connection.send(answer)
             except Exception:  # noqa: BLE001 - an exception that does not pickle: its line
                 connection.send((False, "".join(traceback.format_exception_only(answer[1])).strip()))
+
+
+def _receive(connection):
+    """The next list of calls; None at the end, or when the parent has gone without closing the
+    pool (killed: nothing to draw for)."""
+    try:
+        return connection.recv()
+    except (EOFError, OSError):
+        return None
 
 
 def _warm_up() -> None:
