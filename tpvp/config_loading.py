@@ -195,10 +195,12 @@ def _check_methods(config) -> None:
     from tpvp.nbv.methods import NBV_METHODS  # registries load at make_config, not at import
     from tpvp.registration.methods import REGISTRATION_METHODS  # a registry loads its plugins: at load
     from tpvp.setcover.methods import SELECTION_METHODS  # a registry loads its plugins: at load
+    from tpvp.sensor.noise import NOISE_PROFILES  # the noise profiles' registry: at load
 
     for registry, name, key in ((NBV_METHODS, config.nbv.method, "nbv.method"),
                                 (REGISTRATION_METHODS, config.registration.method, "registration.method"),
-                                (SELECTION_METHODS, config.selection.method, "selection.method")):
+                                (SELECTION_METHODS, config.selection.method, "selection.method"),
+                                (NOISE_PROFILES, config.sensor.noise, "sensor.noise")):
         if name not in registry:
             raise ConfigError(f"configuration key {key!r}: unknown {registry.kind} {name!r}; "
                               f"choose one of {', '.join(registry.names())}")

@@ -21,7 +21,7 @@ def warm_up(scene, config):
     nbv.integrate(initial, seen)
     for _ in range(config.nbv.warm_up_views):
         choice = nbv.next_view()
-        nbv.integrate(choice.view, scene.observe(choice.view))
+        nbv.integrate(choice.view, scene.observe(choice.view, len(nbv.executed)))  # its place among the captures
     return nbv
 
 

@@ -19,6 +19,9 @@ class SensorConfig:
     max_range: float = 1.0  # m; ROW_RANGE in greenhouse rows
     pixel_stride: int = 1  # pixel model only
     intrinsics: Intrinsics = field(default=D435)
+    # The sensor's errors: a profile of tpvp.sensor.noise.NOISE_PROFILES (checked when a configuration
+    # is made: tpvp.config_loading); "ideal" is the exact sensor.
+    noise: str = "ideal"
 
     def __post_init__(self):
         if self.model not in MODELS:
@@ -27,3 +30,5 @@ class SensorConfig:
             raise ConfigError(f"max_range must be > 0 m, got {self.max_range!r}")
         if int(self.pixel_stride) < 1:
             raise ConfigError(f"pixel_stride must be a positive integer, got {self.pixel_stride!r}")
+        if not isinstance(self.noise, str) or not self.noise:
+            raise ConfigError(f"noise must be the name of a noise profile, got {self.noise!r}")

@@ -101,7 +101,7 @@ def execute_replanning(scene: Scene, config: PlantConfig, transferred: Transfer,
     prediction, rows = prediction_of(surface, warm_up_views), []
     while left := result.planned_views[len(nbv.executed) - warm_up_views:]:
         for view in left[:step]:
-            nbv.integrate(view, scene.observe(view))
+            nbv.integrate(view, scene.observe(view, len(nbv.executed)))  # its place among the captures
         result, prediction, row = replan(known(scene), config, nbv, warm_up_views, result.planned_views, prediction,
                                          progress)
         rows.append(row)

@@ -18,6 +18,7 @@ from tpvp.scene.frame import check_plant_voxels, known_from_previous, planning_f
 from tpvp.scene.grid import plant_grid
 from tpvp.scene.normalise import check_session_pair, up_rotation
 from tpvp.scene.organs import voxel_organs
+from tpvp.sensor.noise import apply_noise, noise_profile
 from tpvp.visibility import oracle_voxels, visibility_matrix
 
 
@@ -43,6 +44,8 @@ class Scene:
     reduction: dict | None = None  # points in and used per scan, reduction voxel
     previous_organs: np.ndarray | None = None  # organ code of each point of ``previous`` (tpvp.scene.organs)
     voxel_organs: np.ndarray | None = None  # organ code of each ground-truth voxel of ``grid``
+    seed: int = 0  # the configuration's seed: the captures' noise (``sensor.noise``) is drawn from it
+    per_metre: float = 1.0  # planning-frame units per metre of the sensor's world (the noise's figures)
 
     @property
     def views(self) -> np.ndarray:
@@ -53,9 +56,20 @@ class Scene:
         """Planning-frame metres per scan metre."""
         return float(np.cbrt(np.linalg.det(self.plant_from_scan[:3, :3])))
 
-    def observe(self, view: int) -> np.ndarray:
-        """What ``view`` observes of the current plant: the centres of the ground-truth voxels it sees."""
-        return self.grid.centres[self.truth_visibility[view].indices]
+    def observe(self, view: int, capture: int = 0) -> np.ndarray:
+        """What ``view`` observes of the current plant: the centres of the ground-truth voxels it
+        sees, as the configured sensor (``sensor.noise``, :mod:`tpvp.sensor.noise`) reports them.
+        ``capture``: the view's place in the session's order of captures (0 first); the pose drift
+        grows with it over a sequence as long as the view space. The noise is drawn from
+        ``default_rng([seed, view, capture])``; the ``ideal`` sensor returns the exact centres.
+        Only the observation is noisy: ``truth_visibility`` and the coverage stay exact."""
+        exact = self.grid.centres[self.truth_visibility[view].indices]
+        profile = noise_profile(getattr(self.sensor, "noise", "ideal"))
+        if profile.ideal:
+            return exact
+        rng = np.random.default_rng([int(self.seed), int(view), int(capture)])
+        return apply_noise(profile, exact, self.view_space.positions[view], int(capture), len(self.view_space), rng,
+                           self.per_metre, drift_seed=int(self.seed))
 
 
 def build_scene(previous_points, current_points, config,
@@ -100,7 +114,8 @@ def build_scene(previous_points, current_points, config,
     if len(oracle) == 0:
         raise ConfigError(_unseen(config, space, sensor, current.scale if config.scene.scale == "native" else 1.0))
     return Scene(previous, current_points, grid, space, sensor, truth, oracle, frame.plant_from_scan,
-                 current.table_points, names, reduction, previous_organs, grid_organs)
+                 current.table_points, names, reduction, previous_organs, grid_organs, config.seed,
+                 current.scale if config.scene.scale == "native" else 1.0)
 
 
 def _unseen(config, space, sensor, per_metre: float) -> str:
