@@ -1,8 +1,10 @@
 """One greenhouse-row case of the paper, end to end in the simulator (docs/greenhouse.md).
 
-The passive sweep (15 fixed views) is captured on the current session's ground truth; the planner
-(:mod:`tpvp.pipeline.plan`) plans from what the robot knows (``scene.known``: the coarse
-reconstruction Q and the previous session, never the ground truth); the plan is executed on the
+The passive sweep (15 fixed views) is captured on the current session's ground truth through the
+sensor (``sensor.noise``; Q is fused from the captures as a row session fuses them,
+docs/sensor.md#sensor-noise); the planner (:mod:`tpvp.pipeline.plan`) plans from what the robot
+knows (``scene.known``: the coarse reconstruction Q and the previous session, never the ground
+truth); the plan is executed on the
 ground truth, its coverage normalised by the FOV-free oracle (cached on disk). The baselines
 of Tables V-VI (the prior ladder with random selection, each prior's upper limit) reuse the same
 scene and candidates. The stages live in their packages (the oracle and its cache in
@@ -26,6 +28,7 @@ from tpvp.scene import voxels
 from tpvp.scene.boxes import room_config
 from tpvp.scene.frame import check_row
 from tpvp.scene.grid import build_grid
+from tpvp.sensor.noise import apply_noise, noise_profile
 from tpvp.viewspace.lookat import CandidateViews
 from tpvp.viewspace.priors import candidate_views
 from tpvp.visibility import coverage_ratio, covered_voxels, safe_visibility
@@ -93,9 +96,60 @@ def build_row_scene(previous_points, current_points, config: RowConfig = RowConf
         raise PointCloudError(f"{names[1]}: no voxel of the row is visible from {room_cfg.room}'s view box")
     current = voxels.voxel_centroids(current, resolution)
     observed = observed_points(grid, current) if config.coarse == "centroids" else grid.centres
-    known = Known(previous, config.sensor, tuple(names), room=room_cfg, coarse=observed[seen],
-                  passive_cameras=room_cfg.initial_positions[first_view[seen]], timings=timings, date=date)
+    profile = noise_profile(config.sensor.noise)
+    if profile.ideal:
+        coarse, cameras = observed[seen], room_cfg.initial_positions[first_view[seen]]
+    else:  # each view's capture through the sensor, then the reduction a row session makes of its captures
+        t = time.perf_counter()
+        sweep = len(room_cfg.initial_positions)
+        captures = [(view, noisy_capture(profile, observed[np.sort(passive[view].indices)],
+                                         room_cfg.initial_positions[view], view, view, sweep, config.seed))
+                    for view in range(passive.shape[0])]
+        coarse, first = passive_reconstruction(captures, resolution, config.coarse)
+        cameras = room_cfg.initial_positions[first]
+        timings["passive"] += time.perf_counter() - t
+    known = Known(previous, config.sensor, tuple(names), room=room_cfg, coarse=coarse,
+                  passive_cameras=cameras, timings=timings, date=date)
     return RowScene(known, current, grid, oracle, passive, seen, from_cache)
+
+
+def noisy_capture(profile, points, position, view: int, capture: int, captures: int, seed: int) -> np.ndarray:
+    """``points`` (room frame, metres) seen from ``position`` as ``profile``'s sensor reports them:
+    capture ``capture`` of a sequence of ``captures``, drawn from ``default_rng([seed, view,
+    capture])``, the drift's direction from ``seed`` (as :meth:`tpvp.simulate.world.Scene.observe`)."""
+    rng = np.random.default_rng([int(seed), int(view), int(capture)])
+    return apply_noise(profile, points, position, int(capture), int(captures), rng, 1.0, drift_seed=int(seed))
+
+
+def capture_voxels(points, resolution: float) -> tuple[np.ndarray, np.ndarray]:
+    """``(codes, centroids)``: the voxels (code order) a capture's points fall in and the centroid
+    of its points in each, computed as a session records a capture (``Session._add_voxels``)."""
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    codes, inverse = np.unique(voxels.encode_keys(voxels.voxel_keys(points, resolution)), return_inverse=True)
+    inverse = inverse.reshape(-1)
+    counts = np.bincount(inverse, minlength=len(codes)).astype(np.float64)
+    centroids = np.stack([np.bincount(inverse, weights=points[:, a], minlength=len(codes)) for a in range(3)],
+                         axis=1) / counts[:, None]
+    return codes, centroids
+
+
+def passive_reconstruction(captures, resolution: float, coarse: str = "centroids") -> tuple[np.ndarray, np.ndarray]:
+    """Q and the view that gave each point, from the passive captures ``[(view, points), ...]`` as a
+    row session fuses them (:meth:`tpvp.session.row.RowSession.known`): every voxel (key order) any
+    capture's points fall in; per voxel the centroid of the points the first view (lowest index)
+    that saw it captured there (``coarse = centroids``) or the voxel centre (``centres``)."""
+    captures = sorted(captures, key=lambda c: c[0])
+    reduced = [capture_voxels(points, resolution) for _, points in captures]
+    union = np.unique(np.concatenate([codes for codes, _ in reduced]))
+    first = np.full(len(union), -1, dtype=np.int64)
+    points = voxels.key_centres(voxels.decode_keys(union), resolution)
+    for (view, _), (codes, centroids) in zip(captures, reduced):
+        at = np.searchsorted(union, codes)
+        new = first[at] < 0
+        first[at[new]] = view
+        if coarse == "centroids":
+            points[at[new]] = centroids[new]
+    return points, first
 
 
 def observed_points(grid, centroids) -> np.ndarray:

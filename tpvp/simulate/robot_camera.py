@@ -13,9 +13,11 @@ from dataclasses import replace
 
 import numpy as np
 
+from tpvp.errors import ConfigError
 from tpvp.scene.frame import scan_points
+from tpvp.sensor.noise import noise_profile
 from tpvp.sensor.sensor import depth_image
-from tpvp.simulate.greenhouse import build_row_scene, observed_points
+from tpvp.simulate.greenhouse import build_row_scene, noisy_capture, observed_points
 from tpvp.simulate.world import build_scene
 from tpvp.session.plant import PlantSession
 from tpvp.visibility import safe_visibility
@@ -53,13 +55,30 @@ class RowStandInCamera:
         self.config = config
         self.scene = build_row_scene(previous, current, config, names, cache_dir=cache_dir)
 
-    def cloud(self, position, look_at) -> np.ndarray:
+    def cloud(self, position, look_at, view: int | None = None, capture: int | None = None) -> np.ndarray:
         """What the pose observes of today's row (room frame): per voxel seen, the centroid of the
-        row's points in it (``coarse = centroids``) or its centre, as the simulator's passive sweep."""
+        row's points in it (``coarse = centroids``) or its centre, as the simulator's passive sweep,
+        through the configured sensor (``sensor.noise``) as the simulator's sweep draws it: ``view``
+        (by default the passive-sweep view at this exact pose) and ``capture`` (by default ``view``:
+        its place in the session's order) seed the noise; the sequence is the sweep's 15 captures
+        (longer when ``capture`` is later). A pose off the sweep needs ``view`` under a noisy sensor."""
         scene = self.scene
         seen = safe_visibility(scene.grid, np.reshape(position, (1, 3)), np.reshape(look_at, (1, 3)), scene.sensor)
         points = observed_points(scene.grid, scene.current) if self.config.coarse == "centroids" else scene.grid.centres
-        return points[seen[0].indices]
+        profile = noise_profile(self.config.sensor.noise)
+        if profile.ideal:
+            return points[seen[0].indices]
+        room = scene.room
+        if view is None:
+            at = np.flatnonzero(np.all(room.initial_positions == np.reshape(position, (1, 3)), axis=1)
+                                & np.all(room.initial_look_ats == np.reshape(look_at, (1, 3)), axis=1))
+            if not len(at):
+                raise ConfigError(f"sensor.noise {self.config.sensor.noise!r}: a pose off the passive sweep needs "
+                                  f"its view index (cloud(..., view=N)) to seed its noise")
+            view = int(at[0])
+        capture = int(view if capture is None else capture)
+        return noisy_capture(profile, points[np.sort(seen[0].indices)], np.reshape(position, 3), view, capture,
+                             max(len(room.initial_positions), capture + 1), self.config.seed)
 
     def depth(self, position, look_at) -> np.ndarray:
         """The depth image (metres, NaN where nothing is seen) of the pose, every pixel."""
