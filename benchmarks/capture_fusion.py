@@ -4,8 +4,12 @@ speed of a 1,000-frame 256 x 192 capture.
 
 * accuracy: plants (tomato and maize, seeds 0-2, 120-frame orbits, ``--scale plant``: 5 mm voxels)
   and rows (room1 and room4, the handheld walk, ``--scale row``: 1 cm): the Chamfer distance of the
-  fused cloud to the truth (all of it, and what the capture saw), both directed means and the point
-  counts; the three layouts of one plant capture, their largest difference.
+  fused cloud to the truth (all of it, and what the capture saw), both directed means, the F-score
+  at 5 mm (precision: share of fused points within 5 mm of the truth; recall: share of the truth
+  within 5 mm of the fused cloud) and the point counts; the three layouts of one plant capture,
+  their largest difference. ``--noise PROFILE`` writes every stand-in capture with that sensor
+  noise profile's depth and pose errors (tpvp.sensor.noise.apply_depth_noise, noise seed = the
+  scene's seed); ``--plants-only`` measures the plants alone.
 * plan: the same plants, today's session (``today.ply``: two days later, the same 0.4 m scale) planned
   by ``tpvp plan`` from the fused capture and from the generated previous session (``truth.ply``):
   views, true coverage, path length.
@@ -13,8 +17,10 @@ speed of a 1,000-frame 256 x 192 capture.
   the anchor is reading the same frames' depth and colour images alone, in the same process.
 
 Usage:
-    python benchmarks/capture_fusion.py [--modes accuracy plan speed] [--work DIR]
-Writes benchmarks/results/capture_fusion.md (with this command) and prints the tables.
+    python benchmarks/capture_fusion.py [--modes accuracy plan speed] [--work DIR] [--noise PROFILE]
+        [--plants-only] [--results FILE]
+Writes benchmarks/results/capture_fusion.md (capture_fusion_PROFILE.md under a noise profile other
+than ideal; or FILE) with this command and prints the tables.
 """
 
 from __future__ import annotations
@@ -36,11 +42,23 @@ from tpvp.metrics.geometry import nearest_distances
 
 RESULTS = Path(__file__).resolve().parent / "results" / "capture_fusion.md"
 SIZE = 0.4  # m, the plants' largest side
+F_SCORE_MM = 5.0
+NOISE = {"profile": "ideal"}  # the stand-in captures' noise profile (--noise)
+PLANTS_ONLY = {"on": False}
+
+
+def _standin(output: Path, fmt: str, scene, seed: int = 0, progress: bool = False) -> Path:
+    return write_standin(output, fmt, scene, progress=progress, noise=NOISE["profile"], noise_seed=seed)
 
 
 def _distances(fused, truth) -> dict:
-    there, back = nearest_distances(fused, truth).mean(), nearest_distances(truth, fused).mean()
-    return {"fused_to_truth_mm": 1000 * there, "truth_to_fused_mm": 1000 * back, "chamfer_mm": 500 * (there + back)}
+    there_all, back_all = nearest_distances(fused, truth), nearest_distances(truth, fused)
+    there, back = there_all.mean(), back_all.mean()
+    precision = float((there_all <= F_SCORE_MM / 1000).mean())
+    recall = float((back_all <= F_SCORE_MM / 1000).mean())
+    f_score = 2 * precision * recall / (precision + recall) if precision + recall else 0.0
+    return {"fused_to_truth_mm": 1000 * there, "truth_to_fused_mm": 1000 * back, "chamfer_mm": 500 * (there + back),
+            f"F@{F_SCORE_MM:g}mm %": 100 * f_score}
 
 
 def _fused(folder: Path, scale: str):
@@ -54,22 +72,24 @@ def accuracy(work: Path) -> list:
     rows, layouts = [], []
     for species in ("tomato", "maize"):
         for seed in (0, 1, 2):
-            folder = write_standin(work / f"{species}{seed}", "nerfstudio", plant_scene(species, seed, SIZE),
-                                   progress=False)
+            folder = _standin(work / f"{species}{seed}", "nerfstudio", plant_scene(species, seed, SIZE), seed)
             rows.append(_accuracy_row(f"{species} seed {seed}", folder, "plant"))
+    title = f"Fused cloud against the generated truth (noise {NOISE['profile']})"
+    if PLANTS_ONLY["on"]:
+        return [(title, pd.DataFrame(rows))]
     prepared = []
     for room in ("room1", "room4"):
-        folder = write_standin(work / room, "polycam", row_scene(room, 0), progress=False)
+        folder = _standin(work / room, "polycam", row_scene(room, 0))
         rows.append(_accuracy_row(f"{room} row seed 0", folder, "row"))
         prepared.append(_prepared_row(room, folder, work))
     scene = plant_scene("tomato", 0, SIZE)
-    clouds = {fmt: _fused(write_standin(work / f"layout_{fmt}", fmt, scene, progress=False), "plant")[0]
+    clouds = {fmt: _fused(_standin(work / f"layout_{fmt}", fmt, scene), "plant")[0]
               for fmt in FORMATS}
     for fmt in FORMATS:
         layouts.append({"layout": fmt, "points": len(clouds[fmt]),
                         "largest difference to nerfstudio's (m)": float(nearest_distances(clouds[fmt],
                                                                                           clouds["nerfstudio"]).max())})
-    return [("Fused cloud against the generated truth", pd.DataFrame(rows)),
+    return [(title, pd.DataFrame(rows)),
             ("One capture in three layouts (tomato seed 0)", pd.DataFrame(layouts)),
             ("A fused row through prepare-session (a new dataset: its reference day)", pd.DataFrame(prepared))]
 
@@ -112,7 +132,7 @@ def plan(work: Path) -> list:
     for species in ("tomato", "maize"):
         for seed in (0, 1, 2):
             scene = plant_scene(species, seed, SIZE)
-            capture = write_standin(work / f"pair_{species}{seed}", "nerfstudio", scene, progress=False)
+            capture = _standin(work / f"pair_{species}{seed}", "nerfstudio", scene, seed)
             fused, _, _ = _fused(capture, "plant")
             fused_file = write_point_cloud(work / f"pair_{species}{seed}_fused.ply", fused)
             from_truth = _plan(capture / "truth.ply", capture / "today.ply", work / f"plan_truth_{species}{seed}")
@@ -130,7 +150,7 @@ def plan(work: Path) -> list:
 
 
 def speed(work: Path) -> list:
-    folder = write_standin(work / "thousand", "depth", plant_scene("tomato", 0, SIZE, frames=1000))
+    folder = _standin(work / "thousand", "depth", plant_scene("tomato", 0, SIZE, frames=1000), progress=True)
     capture = read_capture(folder)
     start = time.perf_counter()
     for frame in capture.frames:
@@ -152,7 +172,21 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--modes", nargs="+", default=list(MODES), choices=list(MODES))
     parser.add_argument("--work", type=Path, default=None, help="folder for the captures (default: a temporary one)")
+    parser.add_argument("--noise", default="ideal", help="the stand-in captures' sensor noise profile: ideal, "
+                                                        "arm-rgbd, phone-lidar (default: %(default)s)")
+    parser.add_argument("--plants-only", action="store_true", help="accuracy: the plants alone (no rows, layouts)")
+    parser.add_argument("--results", type=Path, default=None, help="the results file (default: see the usage)")
     args = parser.parse_args()
+    from tpvp.errors import TpvpError
+    from tpvp.sensor.noise import noise_profile
+
+    try:
+        noise_profile(args.noise)
+    except TpvpError as error:
+        parser.error(str(error))
+    NOISE["profile"], PLANTS_ONLY["on"] = args.noise, args.plants_only
+    results = args.results or (RESULTS if args.noise == "ideal"
+                               else RESULTS.with_name(f"capture_fusion_{args.noise}.md"))
     with tempfile.TemporaryDirectory() as temporary:
         work = args.work or Path(temporary)
         tables = []
@@ -162,8 +196,9 @@ def main() -> None:
             print(f"{mode}: {time.perf_counter() - start:.0f} s")
             for title, table in tables:
                 print(f"\n{title}\n{table.to_string(index=False)}")
-    write_results(RESULTS, tables, f"modes {', '.join(args.modes)}; on 2 cores")
-    print(json.dumps({"results": str(RESULTS)}))
+    write_results(results, tables, f"modes {', '.join(args.modes)}; noise {args.noise}"
+                                   f"{'; plants only' if args.plants_only else ''}; on 2 cores")
+    print(json.dumps({"results": str(results)}))
 
 
 if __name__ == "__main__":

@@ -137,9 +137,11 @@ def _capture_standin(args) -> int:
 
     scene = (plant_scene(args.species, args.seed, args.size, args.frames) if args.scene == "plant"
              else row_scene(args.room, args.seed))
-    folder = write_standin(args.output, args.format, scene, force=args.force)
+    seed = args.seed if args.noise_seed is None else args.noise_seed
+    folder = write_standin(args.output, args.format, scene, force=args.force, noise=args.noise, noise_seed=seed)
     print(f"wrote a {args.format} capture of a generated {args.species if args.scene == 'plant' else args.room} "
-          f"({len(scene.positions)} frames) and its truth.ply to {folder}; next: python -m data_tools capture fuse "
+          f"({len(scene.positions)} frames, noise {args.noise}) and its truth.ply to {folder}; next: "
+          f"python -m data_tools capture fuse "
           f"{folder} --scale {args.scene} --output cloud.ply")
     return 0
 
@@ -253,6 +255,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--frames", type=int, default=120, help="frames of the orbit (default: %(default)s)")
     p.add_argument("--room", default="room1", choices=["room1", "room4"], help="the row's room (default: %(default)s)")
     p.add_argument("--seed", type=int, default=0, help="random seed of the generated scene (default: %(default)s)")
+    p.add_argument("--noise", default="ideal",
+                   help="sensor noise profile of the depth and poses: ideal, arm-rgbd, phone-lidar "
+                        "(docs/sensor.md#sensor-noise; default: %(default)s, exact)")
+    p.add_argument("--noise-seed", type=int, default=None,
+                   help="seed of the noise: frame i draws from (seed, i) (default: --seed)")
     p.add_argument("--force", action="store_true", help="replace an existing stand-in folder")
     p.set_defaults(func=_capture_standin)
 

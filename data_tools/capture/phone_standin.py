@@ -9,6 +9,8 @@ holding the phone) or the handheld walk along the row's aisle
 surface along every pixel ray, :func:`tpvp.sensor.sensor.depth_image`) over the scene voxelised at
 ``render_voxel``, at a phone LiDAR's 256 x 192 pixels; the colour image is the same render at twice
 that size, the colour of the voxel each pixel sees; the confidence is high wherever there is depth.
+Depth and poses are exact unless a noise profile is named (:func:`noisy_frames`: a phone LiDAR's
+depth errors and ARKit-like pose errors, :func:`tpvp.sensor.noise.apply_depth_noise`).
 
 Beside the capture, ``truth.ply`` holds the generated points in the capture's world frame with
 label 1 where the capture saw them (their voxel was seen by at least one frame), else 0; for a
@@ -166,7 +168,7 @@ def _millimetres(depth: np.ndarray) -> np.ndarray:
 
 
 def _confidence(depth: np.ndarray) -> np.ndarray:
-    return np.where(np.isfinite(depth), 2, 0).astype(np.uint8)
+    return np.where(np.isfinite(depth) & (depth > 0), 2, 0).astype(np.uint8)  # a dropout (0) is no depth
 
 
 def image_intrinsics(depth: Intrinsics) -> Intrinsics:
@@ -217,15 +219,40 @@ def _write_depth_folder(folder: Path, scene: StandinScene, frames) -> None:
 WRITERS = {"nerfstudio": _write_nerfstudio, "polycam": _write_polycam, "depth": _write_depth_folder}
 
 
-def write_standin(output, fmt: str, scene: StandinScene, progress: bool = True, force: bool = False) -> Path:
+def noisy_frames(frames, intrinsics: Intrinsics, noise: str = "ideal", seed: int = 0) -> list:
+    """``frames`` (:func:`render`'s) as the sensor and tracking of noise profile ``noise``
+    (:data:`tpvp.sensor.noise.NOISE_PROFILES`) report them: frame i's depth through
+    :func:`tpvp.sensor.noise.apply_depth_noise` with ``default_rng([seed, i])`` (the drift's
+    direction from ``seed``), its pose the reported one; the colour stays. ``ideal``: ``frames``
+    unchanged. An unknown profile is one error line listing the choices."""
+    from tpvp.sensor.noise import apply_depth_noise, noise_profile
+
+    profile = noise_profile(noise)
+    if profile.ideal:
+        return list(frames)
+    out = []
+    for i, (pose, depth, colour) in enumerate(frames):
+        depth, pose = apply_depth_noise(profile, depth, intrinsics, pose, i, len(frames),
+                                        np.random.default_rng([int(seed), i]), drift_seed=int(seed))
+        out.append((pose, depth, colour))
+    return out
+
+
+def write_standin(output, fmt: str, scene: StandinScene, progress: bool = True, force: bool = False,
+                  noise: str = "ideal", noise_seed: int = 0) -> Path:
     """Render ``scene`` and write it as a ``fmt`` capture (:data:`WRITERS`) with its ``truth.ply``
-    into ``output``, published whole; returns the folder."""
+    into ``output``, published whole; returns the folder. ``noise``, ``noise_seed``: the depth and
+    pose errors of :func:`noisy_frames` (``truth.ply`` and its labels stay exact)."""
+    from tpvp.sensor.noise import noise_profile
+
     if fmt not in WRITERS:
         raise ConfigError(f"unknown capture format {fmt!r}; choose one of {', '.join(WRITERS)}")
+    noise_profile(noise)  # an unknown profile is refused before any rendering
     output = Path(output)
     if output.exists() and any(output.iterdir()) and not force:
         raise ConfigError(f"{output} exists and is not empty: pass --force to replace it, or choose another folder")
     frames, seen = render(scene, progress)
+    frames = noisy_frames(frames, scene.intrinsics, noise, noise_seed)
     with staged_folder(output, what="capture folder") as stage:
         WRITERS[fmt](stage.folder, scene, frames)
         write_point_cloud(stage.path("truth.ply"), scene.points, labels=seen.astype(np.int64), colors=scene.colours)

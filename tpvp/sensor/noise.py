@@ -190,3 +190,69 @@ def apply_noise(profile: NoiseProfile, points, position, capture: int, captures:
     seen = (camera + rays * (depth * per_metre)[:, None])[keep]
     rotation, translation = pose_error(profile, capture, captures, rng, drift_seed)
     return camera + translation * per_metre + (seen - camera) @ rotation.T
+
+
+def apply_depth_noise(profile: NoiseProfile, depth, intrinsics, camera_to_world, capture: int, captures: int,
+                      rng: np.random.Generator, drift_seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """One pinhole depth image as ``profile``'s sensor and tracking report it: ``(depth, pose)``.
+
+    ``depth``: ``(H, W)`` camera-z depth in metres, no return where it is 0 or not finite (kept as
+    it is); ``intrinsics``: the image's pinhole (:class:`tpvp.sensor.camera.Intrinsics`, pixel
+    ``(u, v)`` centred at ``u``, ``v``); ``camera_to_world``: the true ``(4, 4)`` pose (OpenCV
+    axes); capture ``capture`` of a sequence of ``captures``. The same errors as :func:`apply_noise`:
+
+    * the pose error is drawn first (so it does not depend on the image's size): ``(R, t) =``
+      :func:`pose_error` of the same ``rng`` and ``drift_seed``; the reported pose turns the camera
+      by ``R`` about its centre and moves it by ``t`` (world axes), so the image fused with it
+      lands where :func:`apply_noise` puts the same points: ``[R @ R_true | c + t]``;
+    * depth noise along each pixel's ray: the ray distance is ``r = z * s`` with
+      ``s = |((u - cx) / fx, (v - cy) / fy, 1)|``; ``r`` gets a Gaussian error of
+      ``sigma(r) = a + b r^2``, i.e. ``z`` one of ``sigma(r) / s`` (one normal draw per pixel);
+    * dropouts: each pixel's depth becomes 0 with probability ``dropout`` (one uniform per pixel);
+    * mixed pixels: a pixel whose neighbourhood (itself and the pixels within the smallest square
+      window holding ``edge_neighbours`` neighbours: 3 x 3 for 8) has true depths with a step over
+      ``edge_jump`` is, with the share ``mixed_pixels``, given a depth drawn uniformly between the
+      least and the greatest true z there (two uniforms per pixel); pixels without a return count
+      as no neighbour and are never moved;
+    * quantisation of the reported z (a depth image's unit) to ``quantisation``, last; depth
+      pushed below 0 becomes 0 (no return).
+
+    All draws are over the whole image in row-major order. The ideal profile returns ``depth`` and
+    ``camera_to_world`` themselves and draws nothing from ``rng``.
+    """
+    if profile.ideal:
+        return depth, camera_to_world
+    from scipy.ndimage import maximum_filter, minimum_filter
+
+    pose = np.asarray(camera_to_world, dtype=np.float64)
+    rotation, translation = pose_error(profile, capture, captures, rng, drift_seed)
+    reported = np.eye(4)
+    reported[:3, :3] = rotation @ pose[:3, :3]
+    reported[:3, 3] = pose[:3, 3] + translation
+
+    true_z = np.asarray(depth, dtype=np.float64)
+    height, width = true_z.shape
+    valid = np.isfinite(true_z) & (true_z > 0)
+    k = intrinsics
+    x = (np.arange(width, dtype=np.float64) - k.cx) / k.fx
+    y = (np.arange(height, dtype=np.float64) - k.cy) / k.fy
+    stretch = np.sqrt(1.0 + x[None, :] ** 2 + y[:, None] ** 2)  # ray distance per unit of z
+    z = np.where(valid, true_z, 0.0)
+    along = z * stretch
+    n = height * width
+    noisy = z + rng.standard_normal(n).reshape(height, width) * (profile.sigma(along) / stretch)
+    dropped = rng.random(n).reshape(height, width) < profile.dropout
+    if profile.mixed_pixels:
+        radius = max(1, math.ceil((math.sqrt(profile.edge_neighbours + 1) - 1) / 2))
+        size = 2 * radius + 1
+        near = minimum_filter(np.where(valid, true_z, np.inf), size=size, mode="constant", cval=np.inf)
+        far = maximum_filter(np.where(valid, true_z, -np.inf), size=size, mode="constant", cval=-np.inf)
+        near, far = np.where(valid, near, 0.0), np.where(valid, far, 0.0)  # a valid pixel bounds itself
+        mixed = valid & (far - near > profile.edge_jump) & (rng.random(n).reshape(height, width) < profile.mixed_pixels)
+        between = rng.random(n).reshape(height, width)
+        noisy = np.where(mixed, near + between * (far - near), noisy)
+    if profile.quantisation:
+        noisy = np.round(noisy / profile.quantisation) * profile.quantisation
+    noisy = np.where(dropped, 0.0, np.maximum(noisy, 0.0))
+    out = np.where(valid, noisy, depth).astype(np.asarray(depth).dtype, copy=False)
+    return out, reported
