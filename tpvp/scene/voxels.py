@@ -189,6 +189,34 @@ def voxel_centroids(points: np.ndarray, resolution: float) -> np.ndarray:
     return sums / counts[:, None]
 
 
+def code_centroids(keys: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(codes, centroids)``: the distinct codes of ``keys`` (one key per point, code order) and the
+    centroid of the ``points`` of each: what a capture records of what it saw."""
+    codes, inverse = np.unique(encode_keys(keys), return_inverse=True)
+    inverse = inverse.reshape(-1)
+    counts = np.bincount(inverse, minlength=len(codes)).astype(np.float64)
+    centroids = np.stack([np.bincount(inverse, weights=points[:, a], minlength=len(codes)) for a in range(3)],
+                         axis=1) / counts[:, None]
+    return codes, centroids
+
+
+def first_seen(captures, resolution: float) -> tuple[np.ndarray, np.ndarray]:
+    """A reconstruction from captures ``[(view, codes, centroids or None), ...]``: every voxel
+    (code order) any capture holds, each at the centroid the first view (lowest index) that saw it
+    recorded there (its centre where centroids are None), and that view: ``(points, first)``."""
+    captures = sorted(captures, key=lambda c: c[0])
+    union = np.unique(np.concatenate([codes for _, codes, _ in captures]))
+    first = np.full(len(union), -1, dtype=np.int64)
+    points = key_centres(decode_keys(union), resolution)
+    for view, codes, centroids in captures:
+        at = np.searchsorted(union, codes)
+        new = first[at] < 0
+        first[at[new]] = view
+        if centroids is not None:
+            points[at[new]] = centroids[new]
+    return points, first
+
+
 def union_keys(*key_sets: np.ndarray) -> np.ndarray:
     """Voxels in any of the sets."""
     codes = [encode_keys(k) for k in key_sets]

@@ -348,10 +348,7 @@ class Session:
     def _add_voxels(self, keys, points, view, source, kind, total) -> dict:
         """Record a capture: its voxels (keys of ``points``, planning frame; code order), those the
         plants hold, and the centroid of its points in each (``captures/NNN_centroids.npy``)."""
-        codes, inverse = np.unique(voxels.encode_keys(keys), return_inverse=True)
-        counts = np.bincount(inverse, minlength=len(codes)).astype(np.float64)
-        centroids = np.stack([np.bincount(inverse, weights=points[:, a], minlength=len(codes)) for a in range(3)],
-                             axis=1) / counts[:, None]
+        codes, centroids = voxels.code_centroids(keys, points)
         keys = voxels.decode_keys(codes)
         kept = self._keep(keys)
         keys, centroids = keys[kept], centroids[kept]

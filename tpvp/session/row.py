@@ -81,17 +81,11 @@ class RowSession(Session):
         passive = sorted((c["view"], i) for i, c in enumerate(self.captures) if c["view"] < self.warm_up_views())
         if not passive:
             raise ConfigError(f"{self.folder}: no passive-sweep capture yet: add view 0 first (`tpvp session add`)")
-        records = [self.captures[i] for _, i in passive]
-        codes = [voxels.encode_keys(np.load(self.folder / r["file"], allow_pickle=False)) for r in records]
-        union = np.unique(np.concatenate(codes))
-        first = np.full(len(union), -1, dtype=np.int64)
-        coarse = voxels.key_centres(voxels.decode_keys(union), self.config.gt_resolution)
-        for (view, _), record, code in zip(passive, records, codes):  # lowest view first
-            at = np.searchsorted(union, code)
-            new = first[at] < 0
-            first[at[new]] = view
-            if self.config.coarse == "centroids":
-                coarse[at[new]] = np.load(self.folder / centroid_file(record), allow_pickle=False)[new]
+        centroids = self.config.coarse == "centroids"
+        captures = [(view, voxels.encode_keys(np.load(self.folder / self.captures[i]["file"], allow_pickle=False)),
+                     np.load(self.folder / centroid_file(self.captures[i]), allow_pickle=False) if centroids else None)
+                    for view, i in passive]
+        coarse, first = voxels.first_seen(captures, self.config.gt_resolution)
         room = self.scene.room
         return Known(self.scene.previous, self.config.sensor, self.scene.names, room=room, coarse=coarse,
                      passive_cameras=room.initial_positions[first])

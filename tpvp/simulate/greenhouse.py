@@ -121,35 +121,15 @@ def noisy_capture(profile, points, position, view: int, capture: int, captures: 
     return apply_noise(profile, points, position, int(capture), int(captures), rng, 1.0, drift_seed=int(seed))
 
 
-def capture_voxels(points, resolution: float) -> tuple[np.ndarray, np.ndarray]:
-    """``(codes, centroids)``: the voxels (code order) a capture's points fall in and the centroid
-    of its points in each, computed as a session records a capture (``Session._add_voxels``)."""
-    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-    codes, inverse = np.unique(voxels.encode_keys(voxels.voxel_keys(points, resolution)), return_inverse=True)
-    inverse = inverse.reshape(-1)
-    counts = np.bincount(inverse, minlength=len(codes)).astype(np.float64)
-    centroids = np.stack([np.bincount(inverse, weights=points[:, a], minlength=len(codes)) for a in range(3)],
-                         axis=1) / counts[:, None]
-    return codes, centroids
-
-
 def passive_reconstruction(captures, resolution: float, coarse: str = "centroids") -> tuple[np.ndarray, np.ndarray]:
     """Q and the view that gave each point, from the passive captures ``[(view, points), ...]`` as a
-    row session fuses them (:meth:`tpvp.session.row.RowSession.known`): every voxel (key order) any
-    capture's points fall in; per voxel the centroid of the points the first view (lowest index)
-    that saw it captured there (``coarse = centroids``) or the voxel centre (``centres``)."""
-    captures = sorted(captures, key=lambda c: c[0])
-    reduced = [capture_voxels(points, resolution) for _, points in captures]
-    union = np.unique(np.concatenate([codes for codes, _ in reduced]))
-    first = np.full(len(union), -1, dtype=np.int64)
-    points = voxels.key_centres(voxels.decode_keys(union), resolution)
-    for (view, _), (codes, centroids) in zip(captures, reduced):
-        at = np.searchsorted(union, codes)
-        new = first[at] < 0
-        first[at[new]] = view
-        if coarse == "centroids":
-            points[at[new]] = centroids[new]
-    return points, first
+    row session fuses them (:meth:`tpvp.session.row.RowSession.known`, :func:`tpvp.scene.voxels.first_seen`):
+    per voxel the centroid of the points the first view that saw it captured there (``coarse =
+    centroids``) or the voxel centre (``centres``)."""
+    reduced = [(view, *voxels.code_centroids(voxels.voxel_keys(points, resolution), points))
+               for view, points in captures]
+    return voxels.first_seen([(view, codes, centroids if coarse == "centroids" else None)
+                              for view, codes, centroids in reduced], resolution)
 
 
 def observed_points(grid, centroids) -> np.ndarray:
