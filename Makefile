@@ -50,8 +50,10 @@ system-deps:
 demo: $(STAMP)
 	$(BIN)/tpvp demo --output $(OUT)/demo
 
+# Bytecode is cached even where the environment says not to (PYTHONDONTWRITEBYTECODE): the two workers,
+# the notebooks' kernels and the commands the tests start import the same modules hundreds of times.
 test: $(STAMP)
-	$(BIN)/python -m pytest -n 2 tests
+	env -u PYTHONDONTWRITEBYTECODE $(BIN)/python -m pytest -n 2 tests
 
 bench: $(STAMP)
 	$(BIN)/python -m pip install --quiet -r benchmarks/requirements.txt

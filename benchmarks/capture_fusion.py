@@ -9,7 +9,10 @@ speed of a 1,000-frame 256 x 192 capture.
   within 5 mm of the fused cloud) and the point counts; the three layouts of one plant capture,
   their largest difference. ``--noise PROFILE`` writes every stand-in capture with that sensor
   noise profile's depth and pose errors (tpvp.sensor.noise.apply_depth_noise, noise seed = the
-  scene's seed); ``--plants-only`` measures the plants alone.
+  scene's seed); ``--drift-m M --drift-deg D`` replace that profile's drift (reached at the last
+  frame); ``--refine-poses`` aligns every frame to the model fused so far before integrating it
+  (tpvp.fusion.refine), and the accuracy table then gives the largest correction and the frames
+  that kept their carried one; ``--plants-only`` measures the plants alone.
 * plan: the same plants, today's session (``today.ply``: two days later, the same 0.4 m scale) planned
   by ``tpvp plan`` from the fused capture and from the generated previous session (``truth.ply``):
   views, true coverage, path length.
@@ -18,14 +21,15 @@ speed of a 1,000-frame 256 x 192 capture.
 
 Usage:
     python benchmarks/capture_fusion.py [--modes accuracy plan speed] [--work DIR] [--noise PROFILE]
-        [--plants-only] [--results FILE]
-Writes benchmarks/results/capture_fusion.md (capture_fusion_PROFILE.md under a noise profile other
-than ideal; or FILE) with this command and prints the tables.
+        [--drift-m M --drift-deg D] [--refine-poses] [--plants-only] [--results FILE]
+Writes benchmarks/results/capture_fusion.md (capture_fusion_PROFILE[_driftMmm][_refined].md under a
+noise profile other than ideal, a drift or refinement; or FILE) with this command and prints the tables.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import tempfile
 import time
@@ -34,7 +38,7 @@ from pathlib import Path
 import pandas as pd
 
 from data_tools.capture.formats import FORMATS, load_colour, load_depth, read_capture
-from data_tools.capture.fusion import fuse, fusion_config
+from data_tools.capture.fusion import fuse_capture, fusion_config
 from data_tools.capture.phone_standin import plant_scene, row_scene, write_standin
 from results_file import write_results
 from tpvp.io import read_point_cloud, write_point_cloud
@@ -43,8 +47,9 @@ from tpvp.metrics.geometry import nearest_distances
 RESULTS = Path(__file__).resolve().parent / "results" / "capture_fusion.md"
 SIZE = 0.4  # m, the plants' largest side
 F_SCORE_MM = 5.0
-NOISE = {"profile": "ideal"}  # the stand-in captures' noise profile (--noise)
+NOISE = {"profile": "ideal", "name": "ideal"}  # the stand-in captures' noise profile (--noise, --drift-*)
 PLANTS_ONLY = {"on": False}
+REFINE = {"on": False}  # --refine-poses
 
 
 def _standin(output: Path, fmt: str, scene, seed: int = 0, progress: bool = False) -> Path:
@@ -61,11 +66,15 @@ def _distances(fused, truth) -> dict:
             f"F@{F_SCORE_MM:g}mm %": 100 * f_score}
 
 
-def _fused(folder: Path, scale: str):
+def _fused(folder: Path, scale: str, extra: dict | None = None):
     start = time.perf_counter()
     capture = read_capture(folder)
-    points, _ = fuse(capture, fusion_config(scale), progress=False)
-    return points, len(capture.frames), time.perf_counter() - start
+    fused = fuse_capture(capture, fusion_config(scale, refine_poses=REFINE["on"]), progress=False)
+    if extra is not None and REFINE["on"]:
+        largest = fused.largest_correction()
+        extra.update({"largest correction mm": largest.translation_mm, "largest correction deg": largest.rotation_deg,
+                      "frames kept": sum(c.status.startswith("kept") for c in fused.corrections)})
+    return fused.points, len(capture.frames), time.perf_counter() - start
 
 
 def accuracy(work: Path) -> list:
@@ -74,7 +83,8 @@ def accuracy(work: Path) -> list:
         for seed in (0, 1, 2):
             folder = _standin(work / f"{species}{seed}", "nerfstudio", plant_scene(species, seed, SIZE), seed)
             rows.append(_accuracy_row(f"{species} seed {seed}", folder, "plant"))
-    title = f"Fused cloud against the generated truth (noise {NOISE['profile']})"
+    title = (f"Fused cloud against the generated truth (noise {NOISE['name']}, poses "
+             f"{'refined' if REFINE['on'] else 'as reported'})")
     if PLANTS_ONLY["on"]:
         return [(title, pd.DataFrame(rows))]
     prepared = []
@@ -109,9 +119,10 @@ def _prepared_row(room: str, folder: Path, work: Path) -> dict:
 
 def _accuracy_row(name: str, folder: Path, scale: str) -> dict:
     truth, seen = read_point_cloud(folder / "truth.ply", units="m", return_labels=True)
-    points, frames, seconds = _fused(folder, scale)
+    extra = {}
+    points, frames, seconds = _fused(folder, scale, extra)
     row = {"case": name, "scale": scale, "frames": frames, "fused points": len(points),
-           "truth points seen %": 100 * float((seen == 1).mean()), "seconds": seconds}
+           "truth points seen %": 100 * float((seen == 1).mean()), "seconds": seconds, **extra}
     row.update({f"all: {k}": v for k, v in _distances(points, truth).items()})
     row.update({f"seen: {k}": v for k, v in _distances(points, truth[seen == 1]).items()})
     return row
@@ -160,7 +171,8 @@ def speed(work: Path) -> list:
     points, frames, fusing = _fused(folder, "plant")
     k = capture.frames[0].intrinsics
     return [("Fusion speed", pd.DataFrame([{
-        "frames": frames, "depth pixels": f"{k.width} x {k.height}", "fused points": len(points),
+        "frames": frames, "poses": "refined" if REFINE["on"] else "as reported",
+        "depth pixels": f"{k.width} x {k.height}", "fused points": len(points),
         "fusion s (read + integrate + extract + support)": fusing, "reading the images alone s (anchor)": reading,
         "fusion / anchor": fusing / reading, "ms per frame": 1000 * fusing / frames}]))]
 
@@ -174,6 +186,9 @@ def main() -> None:
     parser.add_argument("--work", type=Path, default=None, help="folder for the captures (default: a temporary one)")
     parser.add_argument("--noise", default="ideal", help="the stand-in captures' sensor noise profile: ideal, "
                                                         "arm-rgbd, phone-lidar (default: %(default)s)")
+    parser.add_argument("--drift-m", type=float, default=None, help="the profile's drift, m (default: the profile's)")
+    parser.add_argument("--drift-deg", type=float, default=None, help="the profile's drift, degrees")
+    parser.add_argument("--refine-poses", action="store_true", help="refine every frame's pose before integrating it")
     parser.add_argument("--plants-only", action="store_true", help="accuracy: the plants alone (no rows, layouts)")
     parser.add_argument("--results", type=Path, default=None, help="the results file (default: see the usage)")
     args = parser.parse_args()
@@ -181,12 +196,16 @@ def main() -> None:
     from tpvp.sensor.noise import noise_profile
 
     try:
-        noise_profile(args.noise)
+        profile = noise_profile(args.noise)
+        drift = {k: v for k, v in (("drift_m", args.drift_m), ("drift_deg", args.drift_deg)) if v is not None}
+        profile = dataclasses.replace(profile, **drift)
     except TpvpError as error:
         parser.error(str(error))
-    NOISE["profile"], PLANTS_ONLY["on"] = args.noise, args.plants_only
-    results = args.results or (RESULTS if args.noise == "ideal"
-                               else RESULTS.with_name(f"capture_fusion_{args.noise}.md"))
+    name = args.noise + (f"_drift{1000 * profile.drift_m:g}mm{profile.drift_deg:g}deg" if drift else "")
+    NOISE["profile"], NOISE["name"] = (args.noise if not drift else profile), name
+    PLANTS_ONLY["on"], REFINE["on"] = args.plants_only, args.refine_poses
+    suffix = name + ("_refined" if args.refine_poses else "")
+    results = args.results or (RESULTS if suffix == "ideal" else RESULTS.with_name(f"capture_fusion_{suffix}.md"))
     with tempfile.TemporaryDirectory() as temporary:
         work = args.work or Path(temporary)
         tables = []
@@ -196,7 +215,8 @@ def main() -> None:
             print(f"{mode}: {time.perf_counter() - start:.0f} s")
             for title, table in tables:
                 print(f"\n{title}\n{table.to_string(index=False)}")
-    write_results(results, tables, f"modes {', '.join(args.modes)}; noise {args.noise}"
+    write_results(results, tables, f"modes {', '.join(args.modes)}; noise {name}"
+                                   f"{'; poses refined' if args.refine_poses else ''}"
                                    f"{'; plants only' if args.plants_only else ''}; on 2 cores")
     print(json.dumps({"results": str(results)}))
 

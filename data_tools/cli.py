@@ -112,23 +112,44 @@ def _prepare_session(args) -> int:
 
 
 def _capture_fuse(args) -> int:
-    from data_tools.capture.formats import read_capture
-    from data_tools.capture.fusion import fuse, fusion_config
-    from tpvp.io import write_point_cloud
+    from contextlib import ExitStack
+    from dataclasses import replace
+
+    from data_tools.capture.formats import detect_format, read_capture
+    from data_tools.capture.fusion import PHONE_LAYOUTS, corrections_csv, corrections_path, fuse_capture, fusion_config
+    from tpvp.io import atomic_write_text, write_point_cloud
     from tpvp.io.publish import staged_file
 
     config = fusion_config(args.scale, voxel_size=args.voxel_size, truncation=args.truncation,
                            max_depth=args.max_depth, min_confidence=args.min_confidence, spacing=args.spacing,
                            support=args.support)
+    corrections = corrections_path(args.output)
     # Locked from the start, as a folder output is: a second run on the same file is refused at once.
-    with staged_file(args.output, inputs=[args.source], force=args.force) as staged:
+    # The corrections file is locked with the cloud and follows the same --force rule.
+    with ExitStack() as outputs:
+        staged = outputs.enter_context(staged_file(args.output, inputs=[args.source], force=args.force))
+        # Default: on for a phone's plant orbit; off for a row, where the stand-in's walk measured worse
+        # refined than as reported (docs/data_tools.md), and for a depth folder (poses not ARKit's).
+        refine = (args.refine_poses if args.refine_poses is not None
+                  else args.scale == "plant" and (args.format or detect_format(args.source)) in PHONE_LAYOUTS)
+        config = replace(config, refine_poses=refine)
+        staged_corrections = (outputs.enter_context(staged_file(corrections, inputs=[args.source], force=args.force,
+                                                                what="corrections file")) if refine else None)
         capture = read_capture(args.source, args.format, args.depth_scale)
         print(f"{capture.folder}: {len(capture.frames)} frames ({capture.format}); fusing at "
               f"{1000 * config.voxel_size:g} mm voxels, truncation {1000 * config.truncation:g} mm, depth up to "
-              f"{config.max_depth:g} m (--scale {args.scale})")
-        points, colours = fuse(capture, config)
-        write_point_cloud(staged, points, colors=colours)
-    print(f"wrote {args.output}: {len(points):,} surface points with colours (metres, the capture's world frame)")
+              f"{config.max_depth:g} m (--scale {args.scale}); poses {'refined' if refine else 'as reported'}")
+        fused = fuse_capture(capture, config)
+        write_point_cloud(staged, fused.points, colors=fused.colours)
+        if staged_corrections is not None:
+            atomic_write_text(staged_corrections, corrections_csv(fused.corrections))
+    print(f"wrote {args.output}: {len(fused.points):,} surface points with colours (metres, the capture's world frame)")
+    if refine:
+        largest = fused.largest_correction()
+        kept = sum(c.status.startswith("kept") for c in fused.corrections)
+        print(f"wrote {corrections}: every frame's pose correction; the largest: frame {largest.name}, "
+              f"{largest.translation_mm:.1f} mm and {largest.rotation_deg:.2f} deg; {kept} of "
+              f"{len(fused.corrections) - 1} frames kept their carried correction (a poor or no gain fit)")
     return 0
 
 
@@ -243,7 +264,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help="keep a surface point where a frame measured it within this, m (default: the scale's)")
     p.add_argument("--depth-scale", type=float, default=None,
                    help="metres per depth unit (default: 0.001 for 16-bit PNG, 1 for .npy, or the intrinsics')")
-    p.add_argument("--force", action="store_true", help="replace an existing output")
+    p.add_argument("--refine-poses", action=argparse.BooleanOptionalAction, default=None,
+                   help="align each frame to the model fused so far before integrating it (point-to-plane ICP) "
+                        "and write the corrections to NAME.corrections.csv beside the output (default: on for the "
+                        "phone layouts nerfstudio and polycam at --scale plant; off for a row and a depth folder)")
+    p.add_argument("--force", action="store_true", help="replace an existing output (and its corrections file)")
     p.set_defaults(func=_capture_fuse)
     p = capture.add_parser("standin", help="write a capture of a generated plant or row (check an import offline)")
     p.add_argument("--format", required=True, choices=FORMATS, help="the layout to write")

@@ -72,8 +72,13 @@ def test_handheld_scan_ignores_the_candidates():
     row = generate_row("room4", 0, 1, point_spacing=0.01).points
     moved = replace(room, candidate_positions=room.candidate_positions[::-1] + 0.3,
                     rand_look_at_points=room.rand_look_at_points + 0.3)
-    assert np.array_equal(handheld_scan(row, room), handheld_scan(row, moved))
-    assert not np.array_equal(candidate_scan(row, room), candidate_scan(row, moved))
+    # a coarse camera at one frame a second: what the scan reads of the room does not depend on its pixels
+    capture = HandheldCapture(frame_rate=1.0, intrinsics=Intrinsics(fx=42.0, fy=42.0, cx=19.5, cy=25.5, width=39,
+                                                                    height=51))
+    kept = handheld_scan(row, room, capture)
+    assert kept.any() and not kept.all()
+    assert np.array_equal(kept, handheld_scan(row, moved, capture))
+    assert not np.array_equal(candidate_scan(row, room, resolution=0.05), candidate_scan(row, moved, resolution=0.05))
 
 
 def test_handheld_scan_counts_frames_like_brute_force():

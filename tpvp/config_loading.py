@@ -22,7 +22,10 @@ from tpvp.errors import ConfigError, InputFileError
 from tpvp.sensor.config import ROW_RANGE
 
 SETTINGS = {"plant": PlantConfig, "row": RowConfig}
-NAMED = {"paper": ("plant", {}), "paper-row": ("row", {})}
+# ``realistic``: a robot's view of a plant (issue 49): the planning frame from the previous model and
+# the first capture, as a session fixes it, and a wrist RGB-D camera's depth and pose errors.
+NAMED = {"paper": ("plant", {}), "paper-row": ("row", {}),
+         "realistic": ("plant", {"scene.frame": "previous", "sensor.noise": "arm-rgbd"})}
 
 # Derived parameters: key -> (rule in words, function of the raw settings). A key the user sets
 # explicitly wins over its rule. docs/configuration.md has the same table with the authors' names.

@@ -219,15 +219,22 @@ def _write_depth_folder(folder: Path, scene: StandinScene, frames) -> None:
 WRITERS = {"nerfstudio": _write_nerfstudio, "polycam": _write_polycam, "depth": _write_depth_folder}
 
 
-def noisy_frames(frames, intrinsics: Intrinsics, noise: str = "ideal", seed: int = 0) -> list:
-    """``frames`` (:func:`render`'s) as the sensor and tracking of noise profile ``noise``
-    (:data:`tpvp.sensor.noise.NOISE_PROFILES`) report them: frame i's depth through
+def _profile(noise):
+    """The noise profile ``noise`` names, or ``noise`` itself when it is a profile."""
+    from tpvp.sensor.noise import NoiseProfile, noise_profile
+
+    return noise if isinstance(noise, NoiseProfile) else noise_profile(noise)
+
+
+def noisy_frames(frames, intrinsics: Intrinsics, noise="ideal", seed: int = 0) -> list:
+    """``frames`` (:func:`render`'s) as the sensor and tracking of noise profile ``noise`` (a name
+    in :data:`tpvp.sensor.noise.NOISE_PROFILES`, or a :class:`~tpvp.sensor.noise.NoiseProfile`) report them: frame i's depth through
     :func:`tpvp.sensor.noise.apply_depth_noise` with ``default_rng([seed, i])`` (the drift's
     direction from ``seed``), its pose the reported one; the colour stays. ``ideal``: ``frames``
     unchanged. An unknown profile is one error line listing the choices."""
-    from tpvp.sensor.noise import apply_depth_noise, noise_profile
+    from tpvp.sensor.noise import apply_depth_noise
 
-    profile = noise_profile(noise)
+    profile = _profile(noise)
     if profile.ideal:
         return list(frames)
     out = []
@@ -239,15 +246,14 @@ def noisy_frames(frames, intrinsics: Intrinsics, noise: str = "ideal", seed: int
 
 
 def write_standin(output, fmt: str, scene: StandinScene, progress: bool = True, force: bool = False,
-                  noise: str = "ideal", noise_seed: int = 0) -> Path:
+                  noise="ideal", noise_seed: int = 0) -> Path:
     """Render ``scene`` and write it as a ``fmt`` capture (:data:`WRITERS`) with its ``truth.ply``
     into ``output``, published whole; returns the folder. ``noise``, ``noise_seed``: the depth and
-    pose errors of :func:`noisy_frames` (``truth.ply`` and its labels stay exact)."""
-    from tpvp.sensor.noise import noise_profile
-
+    pose errors of :func:`noisy_frames`, a profile's name or the profile (``truth.ply`` and its
+    labels stay exact)."""
     if fmt not in WRITERS:
         raise ConfigError(f"unknown capture format {fmt!r}; choose one of {', '.join(WRITERS)}")
-    noise_profile(noise)  # an unknown profile is refused before any rendering
+    _profile(noise)  # an unknown profile is refused before any rendering
     output = Path(output)
     if output.exists() and any(output.iterdir()) and not force:
         raise ConfigError(f"{output} exists and is not empty: pass --force to replace it, or choose another folder")

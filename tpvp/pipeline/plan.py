@@ -34,7 +34,7 @@ from tpvp.inflation.inflate import inflate, inflate_voxels
 from tpvp.inflation.weights import surface_area, surface_classes, surface_weights
 from tpvp.path.local import predicted_size
 from tpvp.path.route import path_through, row_path, row_path_warnings
-from tpvp.pipeline.surface import planning_visibility
+from tpvp.pipeline.surface import planning_visibility, with_captures_seen
 from tpvp.pipeline.timing import timed
 from tpvp.registration.methods import register
 from tpvp.scene.frame import scan_points
@@ -161,6 +161,9 @@ def planning_surface(known: Known, config, transferred: Transfer, progress=None)
         resolution = config.selection.cover_resolution
         grid, visibility = planning_visibility(inflation.planning, resolution, space.positions, space.look_ats,
                                                known.sensor)
+        if config.selection.captures_seen and transferred.nbv is not None:
+            visibility = with_captures_seen(visibility, grid, transferred.nbv.executed,
+                                            transferred.nbv.observations)
         classes = area = None  # only a weighted coverage target reads them
         weights = _class_weights(config)
         if weights is not None and weights.enabled:

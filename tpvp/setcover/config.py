@@ -60,7 +60,10 @@ class SelectionConfig:
     organ_margin_voxels: a named organ's share also holds the planning voxels within this many
     voxels of its predicted ones (organs grow between sessions and a fruit swells into what the
     registered prior labels leaf; 2: calibrated on Helios tomato and maize,
-    benchmarks/species_calibration.py)."""
+    benchmarks/species_calibration.py). captures_seen: a planning voxel holding a point an
+    executed view captured counts as seen by that view (a plant's; off in ``paper``, where the ray
+    cast of the planning grid alone decides, on in ``realistic``:
+    :func:`tpvp.pipeline.surface.with_captures_seen`)."""
 
     method: str = "set-cover"
     cover_resolution: float = 0.004
@@ -69,6 +72,7 @@ class SelectionConfig:
     replan_after: int = 0
     organ_targets: str = ""
     organ_margin_voxels: int = 2
+    captures_seen: bool = False
     set_cover: SetCoverConfig = field(default_factory=SetCoverConfig)
 
     def __post_init__(self):

@@ -6,6 +6,7 @@ run the paper's eight.
 
 from __future__ import annotations
 
+import functools
 import re
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -70,10 +71,16 @@ class RowCase:
     def load(self) -> tuple[np.ndarray, np.ndarray]:
         if self.files:
             return tuple(read_point_cloud(Path(f), units="m") for f in self.files)
-        sessions = generate_row_sessions(self.room, self.seed, self.previous + 2, self.point_spacing)
-        room = room_config(self.room)
-        return tuple(reference_points(sessions[k].points, room, self.reference)
-                     for k in (self.previous, self.previous + 1))
+        pair = _generated_pair(self.room, self.seed, self.previous, self.point_spacing, self.reference)
+        return tuple(points.copy() for points in pair)  # the cached arrays stay as computed
+
+
+@functools.lru_cache(maxsize=4)
+def _generated_pair(room: str, seed: int, previous: int, spacing: float, reference: str) -> tuple:
+    """Generated sessions ``previous`` and ``previous + 1`` as the reference holds them, computed once
+    per process: the handheld reference ray-casts each session from every keyframe (2 s a session)."""
+    sessions = generate_row_sessions(room, seed, previous + 2, spacing)
+    return tuple(reference_points(sessions[k].points, room_config(room), reference) for k in (previous, previous + 1))
 
 
 def dataset_cases(folder, rooms=ROOMS) -> list[RowCase]:
