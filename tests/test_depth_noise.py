@@ -182,3 +182,29 @@ def test_capture_standin_refuses_an_unknown_profile_with_one_line(tmp_path, caps
     assert len(err.splitlines()) == 1
     assert "'phony'" in err and all(name in err for name in ("ideal", "arm-rgbd", "phone-lidar"))
     assert not out.exists()
+
+
+def test_the_stand_in_robot_camera_s_depth_images_carry_the_sensor_s_depth_errors():
+    """tpvp's stand-in camera (a session's robot in the tutorials and tests): ``ideal`` is today's exact
+    image; ``phone-lidar`` is that image through apply_depth_noise, seeded by (seed, view, capture), in metres."""
+    from tpvp.config_loading import make_config
+    from tpvp.scene.samples import load_sample
+    from tpvp.simulate.robot_camera import StandInCamera
+
+    pair = load_sample("tomato_0305"), load_sample("tomato_0306")
+    exact = StandInCamera(*pair, make_config("plant")).depth(17)
+    camera = StandInCamera(*pair, make_config("plant", {"sensor.noise": "phone-lidar"}))
+    noisy, again, later = camera.depth(17), camera.depth(17), camera.depth(17, capture=1)
+    assert np.array_equal(noisy, again, equal_nan=True) and not np.array_equal(noisy, later, equal_nan=True)
+    seen = np.isfinite(exact)
+    assert seen.any() and not np.isfinite(noisy[~seen]).any()  # no return stays no return (mixed pixels need one)
+    scene = camera.scene
+    metres = np.where(seen, exact * scene.scan_scale / scene.per_metre, 0.0)
+    expected, _ = apply_depth_noise(PHONE_LIDAR, metres, camera.scene.sensor.intrinsics, np.eye(4), 0,
+                                    len(scene.view_space), np.random.default_rng([scene.seed, 17, 0]),
+                                    drift_seed=scene.seed)
+    expected = expected * scene.per_metre / scene.scan_scale
+    expected[~(expected > 0)] = np.nan
+    np.testing.assert_allclose(noisy, expected, rtol=1e-12, equal_nan=True)
+    dropped = seen & ~np.isfinite(noisy)
+    assert 0.5 * PHONE_LIDAR.dropout < dropped.sum() / seen.sum() < 3 * PHONE_LIDAR.dropout

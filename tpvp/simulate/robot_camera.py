@@ -15,7 +15,7 @@ import numpy as np
 
 from tpvp.errors import ConfigError
 from tpvp.scene.frame import scan_points
-from tpvp.sensor.noise import noise_profile
+from tpvp.sensor.noise import apply_depth_noise, noise_profile
 from tpvp.sensor.sensor import depth_image
 from tpvp.simulate.greenhouse import build_row_scene, noisy_capture, observed_points
 from tpvp.simulate.world import build_scene
@@ -35,14 +35,24 @@ class StandInCamera:
         """What ``view`` observes of today's plant: voxel centres in the world frame."""
         return scan_points(self.scene.plant_from_scan, self.scene.observe(view))
 
-    def depth(self, view: int) -> np.ndarray:
+    def depth(self, view: int, capture: int = 0) -> np.ndarray:
         """The depth image (metres, NaN where nothing is seen) of ``view`` at the sensor's
-        intrinsics, every pixel."""
-        space = self.scene.view_space
-        sensor = replace(self.scene.sensor, model="pixel", pixel_stride=1)
-        depth, _ = depth_image(self.scene.grid, space.positions[view], space.look_ats[view], sensor)
-        depth = depth / self.scene.scan_scale
-        depth[~np.isfinite(depth)] = np.nan
+        intrinsics, every pixel, with the configured sensor's depth errors (``sensor.noise``:
+        :func:`tpvp.sensor.noise.apply_depth_noise`, drawn from ``default_rng([seed, view, capture])``
+        as :meth:`~tpvp.simulate.world.Scene.observe` draws a cloud's). The pose error is left out: a
+        session places an image at the pose it asked for, and the stand-in renders it there."""
+        scene, space = self.scene, self.scene.view_space
+        sensor = replace(scene.sensor, model="pixel", pixel_stride=1)
+        depth, _ = depth_image(scene.grid, space.positions[view], space.look_ats[view], sensor)
+        depth[~np.isfinite(depth)] = 0.0
+        profile = noise_profile(self.config.sensor.noise)
+        if not profile.ideal:  # the profile's figures are metres of the sensor's world
+            rng = np.random.default_rng([int(scene.seed), int(view), int(capture)])
+            metres, _ = apply_depth_noise(profile, depth / scene.per_metre, sensor.intrinsics, np.eye(4), int(capture),
+                                          len(space), rng, drift_seed=int(scene.seed))
+            depth = metres * scene.per_metre
+        depth = depth / scene.scan_scale
+        depth[~(depth > 0)] = np.nan
         return depth
 
 
