@@ -15,7 +15,7 @@ import sys
 from dataclasses import dataclass
 from typing import Callable
 
-from tpvp.config_loading import load_config, parse_overrides
+from tpvp.config_loading import NAMED, load_config, parse_overrides
 from tpvp.scene.config import SCALES, UP_AXES
 from tpvp.errors import ConfigError, TpvpError
 from tpvp.scene.boxes import ROOMS
@@ -168,7 +168,8 @@ def configuration_options(p, output, named: str = "paper"):
     if output is not None:
         p.add_argument("--output", default=output, help="output folder (default: %(default)s)")
     p.add_argument("--config", default=named, metavar="NAME|FILE",
-                   help=f"named configuration ({named}) or a YAML file, e.g. a run's config.yaml (default: %(default)s)")
+                   help=f"named configuration ({', '.join(n for n, (s, _) in NAMED.items() if s == NAMED[named][0])}) "
+                        f"or a YAML file, e.g. a run's config.yaml (default: %(default)s)")
     listed = "tpvp config --derived" if named == "paper" else f"tpvp config --config {named} --derived"
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help=f"override one configuration key, e.g. --set registration.embedded_deformation.iterations=100 "

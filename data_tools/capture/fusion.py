@@ -19,8 +19,8 @@ from tpvp.fusion.tsdf import (GREY, NEAREST_VOXELS, SCALES, DepthFrame, Fused, F
                               canonical_mesh, fuse_frames, fusion_config, supported, surface_samples)
 
 __all__ = ["GREY", "NEAREST_VOXELS", "NEAR_PERCENTILE", "SCALES", "DepthFrame", "Fused", "FusionConfig",
-           "PHONE_LAYOUTS", "PoseCorrection", "canonical_mesh", "corrections_csv", "corrections_path", "depth_bounds", "frame_depths", "frames_needed", "fuse",
-           "fuse_capture", "fusion_config", "supported", "surface_samples"]
+           "PHONE_LAYOUTS", "PoseCorrection", "canonical_mesh", "corrections_csv", "corrections_path", "depth_bounds",
+           "frame_depths", "frames_needed", "fuse", "fuse_capture", "fusion_config", "supported", "surface_samples"]
 
 #: The layouts a phone writes with ARKit's tracked poses (drift of a few mm to cm over a walk):
 #: their frames of a plant are refined against the model fused so far unless told not to.
