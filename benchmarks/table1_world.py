@@ -97,7 +97,7 @@ def main() -> None:
     what = (f"{len(cases)} cases{' (quick)' if args.quick else ''}, Ours, {args.workers} worker(s), "
             f"{(time.perf_counter() - start) / 60:.1f} min")
     results = args.results or (RESULTS.with_name("table1_world_quick.md") if args.quick else RESULTS)
-    atomic_write_text(results.with_suffix(".csv"), table.to_csv(index=False))
+    atomic_write_text(results.with_suffix(".csv"), table.to_csv(index=False, float_format="%.4g"))  # as printed
     write_results(results,
                   [("Ours by planning frame and sensor noise profile (means over the cases; coverage is the true "
                     "coverage of today's plant)", table)], what)

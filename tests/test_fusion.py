@@ -15,7 +15,8 @@ import pytest
 from data_tools import cli
 from data_tools.capture.fusion import CORRECTION_COLUMNS, corrections_path
 from data_tools.capture.phone_standin import plant_scene, render, write_standin
-from tpvp.fusion.refine import RefineConfig, rotation_of
+from tpvp.fusion.refine import RefineConfig
+from tpvp.sensor.camera import rotation_from_vector
 from tpvp.fusion.tsdf import DepthFrame, fuse_frames, fusion_config
 from tpvp.errors import ConfigError
 
@@ -38,7 +39,7 @@ def frames():
 def off(pose: np.ndarray) -> np.ndarray:
     """``pose`` as a tracker that jumped reports it: turned about the camera, moved (world axes)."""
     reported = pose.copy()
-    reported[:3, :3] = rotation_of(np.radians(OFF_DEG) * np.array([0.6, 0.0, 0.8])) @ pose[:3, :3]
+    reported[:3, :3] = rotation_from_vector(np.radians(OFF_DEG) * np.array([0.6, 0.0, 0.8])) @ pose[:3, :3]
     reported[:3, 3] += OFF_MM / 1000 * np.array([0.0, 0.6, -0.8])
     return reported
 

@@ -1966,8 +1966,9 @@ def _seen(noise: str, seen: bool, column: str) -> list:
 
 
 def _seen_calibration() -> list:
-    return ["10", "11", "0", "17"] if "seeds=(10, 11)" in (ROOT / "benchmarks" / "table1_world.py").read_text() \
-        and "initial_views=(17,)" in (ROOT / "benchmarks" / "table1_world.py").read_text() else ["seeds changed"]
+    code = (ROOT / "benchmarks" / "table1_world.py").read_text()
+    cases = ("seeds=(10, 11)", "rotations=(0.0,)", "initial_views=(17,)")
+    return ["10", "11", "0", "17"] if all(case in code for case in cases) else ["calibration cases changed"]
 
 
 _WORLD = [

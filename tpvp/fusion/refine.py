@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from tpvp.errors import ConfigError
-from tpvp.sensor.camera import Intrinsics
+from tpvp.sensor.camera import Intrinsics, rotation_from_vector
 
 #: A 6 x 6 system conditioned worse than this leaves a motion unconstrained (a wall seen alone).
 MAX_CONDITION = 1e7
@@ -93,16 +93,6 @@ def backproject(depth: np.ndarray, k: Intrinsics, pixels: np.ndarray) -> np.ndar
     v, u = np.divmod(pixels, depth.shape[1])
     z = depth.ravel()[pixels].astype(np.float64)
     return np.column_stack([(u - k.cx) / k.fx * z, (v - k.cy) / k.fy * z, z])
-
-
-def rotation_of(rotvec: np.ndarray) -> np.ndarray:
-    """The rotation matrix of a rotation vector (radians, Rodrigues)."""
-    angle = float(np.linalg.norm(rotvec))
-    if angle == 0.0:
-        return np.eye(3)
-    axis = rotvec / angle
-    cross = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]], [-axis[1], axis[0], 0.0]])
-    return np.eye(3) + math.sin(angle) * cross + (1.0 - math.cos(angle)) * (cross @ cross)
 
 
 @dataclass(frozen=True)
@@ -190,7 +180,7 @@ def point_to_plane(source: np.ndarray, model: Model, camera_to_world: np.ndarray
         so_far = np.concatenate([rotation_vector(motion[:3, :3]), motion[:3, 3]])
         step = -np.linalg.solve(hessian + prior, jacobian.T @ (weight * residual) + prior @ so_far)
         update = np.eye(4)
-        update[:3, :3], update[:3, 3] = rotation_of(step[:3]), step[3:]
+        update[:3, :3], update[:3, 3] = rotation_from_vector(step[:3]), step[3:]
         motion = update @ motion
         if np.linalg.norm(step) < 1e-7:  # converged: metres and radians alike
             break

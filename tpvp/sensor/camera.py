@@ -82,6 +82,16 @@ def look_at_rotations(positions, look_ats) -> np.ndarray:
     )
 
 
+def rotation_from_vector(rotvec: np.ndarray) -> np.ndarray:
+    """The rotation matrix of a rotation vector (radians; Rodrigues' formula)."""
+    angle = float(np.linalg.norm(rotvec))
+    if angle == 0.0:
+        return np.eye(3)
+    axis = rotvec / angle
+    cross = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]], [-axis[1], axis[0], 0.0]])
+    return np.eye(3) + math.sin(angle) * cross + (1.0 - math.cos(angle)) * (cross @ cross)
+
+
 def rotation_to_quaternion(rotation: np.ndarray) -> np.ndarray:
     """Unit quaternion ``(x, y, z, w)`` of a rotation matrix (for robot-facing pose files)."""
     m = np.asarray(rotation, dtype=np.float64)

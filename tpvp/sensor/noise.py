@@ -32,6 +32,7 @@ from scipy.spatial import cKDTree
 
 from tpvp.errors import ConfigError
 from tpvp.registry import Registry
+from tpvp.sensor.camera import rotation_from_vector
 
 DRIFT_STREAM = 0x64726966  # the drift directions' own random stream ("drif"), apart from the captures'
 
@@ -119,16 +120,6 @@ def noise_profile(name: str) -> NoiseProfile:
     return NOISE_PROFILES.get(name)
 
 
-def _rotation(rotvec: np.ndarray) -> np.ndarray:
-    """The rotation matrix of a rotation vector (Rodrigues; radians)."""
-    angle = float(np.linalg.norm(rotvec))
-    if angle == 0.0:
-        return np.eye(3)
-    k = rotvec / angle
-    cross = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
-    return np.eye(3) + math.sin(angle) * cross + (1.0 - math.cos(angle)) * (cross @ cross)
-
-
 def drift_directions(drift_seed: int) -> tuple[np.ndarray, np.ndarray]:
     """The unit translation and rotation axes of a sequence's drift (the same for every capture)."""
     rng = np.random.default_rng([int(drift_seed), DRIFT_STREAM])
@@ -150,7 +141,7 @@ def pose_error(profile: NoiseProfile, capture: int, captures: int, rng: np.rando
         drift_t, drift_r = share * profile.drift_m * axis_t, share * math.radians(profile.drift_deg) * axis_r
     else:
         drift_t = drift_r = np.zeros(3)
-    return _rotation(jitter_r) @ _rotation(drift_r), drift_t + jitter_t
+    return rotation_from_vector(jitter_r) @ rotation_from_vector(drift_r), drift_t + jitter_t
 
 
 def edge_bounds(rays: np.ndarray, depth: np.ndarray, neighbours: int) -> tuple[np.ndarray, np.ndarray]:
