@@ -14,6 +14,7 @@ from tpvp.errors import ConfigError
 from tpvp.experiments.season import SEASON_COLUMNS, prior_missing, run_season
 from tpvp.nbv.warm_up import warm_up
 from tpvp.pipeline.plan import Known, plan, transfer
+from tpvp.simulate.depth_captures import fused_captures
 from tpvp.simulate.world import build_scene
 from tpvp.synthetic.plants import generate_growth_series, generate_plant
 
@@ -57,8 +58,8 @@ def test_a_season_equals_its_sessions_chained_by_hand(series):
     """run_season against the sessions chained here, with nothing of run_case or of the season's
     chaining: each day the simulator renders today's truth and executes the warm-up, the planner's
     public stages (transfer, plan) plan from what the robot knows, written out; the session is
-    measured by brute force on the truth, and the ``own`` arm's next prior is what it saw, brought
-    back into the scan's frame by hand."""
+    measured by brute force on the truth, and the ``own`` arm's next prior is the model fused from
+    its captures' depth images (scan frame)."""
     assert CONFIG.selection.replan_after == 0  # each session plans once
     table = run_season(series, CONFIG, arms=("truth", "own"), name="tomato 0")
     assert tuple(table.columns) == SEASON_COLUMNS
@@ -76,20 +77,21 @@ def test_a_season_equals_its_sessions_chained_by_hand(series):
             truth = sparse.csr_matrix(scene.truth_visibility)
             seeable = set(truth.indices.tolist())
             seen = sorted({int(i) for view in order for i in truth.indices[truth.indptr[view]:truth.indptr[view + 1]]})
-            fused = scene.grid.centres[seen]
+            fused = fused_captures(scene, order)  # the captures' depth images fused (tests/test_depth_captures.py)
             matrix = scene.plant_from_scan
             per_mm = 1e3 / np.cbrt(np.linalg.det(matrix[:3, :3]))  # planning-frame metres -> scan millimetres
             row = table[(table["session"] == day + 1) & (table["arm"] == arm)].iloc[0]
             assert (row["views"], row["coverage"], row["path_length_m"]) == \
                 (len(order), len(seen) / len(seeable), result.path_length), (day, arm)
             assert row["prior_points"] == len(prior)
-            assert row["chamfer_fused_mm"] == pytest.approx(per_mm * brute_chamfer(fused, scene.current))
+            planning = fused @ matrix[:3, :3].T + matrix[:3, 3]
+            assert row["chamfer_fused_mm"] == pytest.approx(per_mm * brute_chamfer(planning, scene.current))
             assert row["registration_chamfer_mm"] == pytest.approx(per_mm * result.chamfer_after)
             plant = scene.grid.centres[scene.grid.countable]
             assert row["prior_missing"] == pytest.approx(
                 brute_prior_missing(plant, result.clouds["warped"], CONFIG.gt_resolution))
             if arm == "own":
-                next_own = (fused - matrix[:3, 3]) @ np.linalg.inv(matrix[:3, :3]).T
+                next_own = fused
         own = next_own
     # session 2 starts both arms from day 1's full scan
     first = table[table["session"] == 2]
@@ -221,10 +223,32 @@ def test_a_dataset_season_is_each_plants_scans_in_date_order(tmp_path, series, c
     from tpvp.io import read_point_cloud
 
     raw = pd.read_csv(tmp_path / "out" / "raw_cases.csv")
-    expected = run_season([read_point_cloud(f, units="m") for f in case.files], CONFIG, arms=("truth",))
+    expected = run_season([read_point_cloud(f, units="m") for f in case.files], case.config(CONFIG), arms=("truth",))
     assert raw["views"].tolist() == expected["views"].tolist() and raw["plant"].eq("Tomato01").all()
     # pairs that do not chain day by day are refused
     (tmp_path / "pairs.csv").write_text("plant,species,previous_date,current_date,days_apart,previous_file,"
                                         "current_file\n" + rows[0] + "\n" + rows[1].replace("03-06,", "03-04,", 1) + "\n")
     assert main(argv) == 2
     assert "do not chain day by day" in capsys.readouterr().err
+
+
+def test_the_season_plans_in_the_known_frame_under_one_sensor():
+    """Every case plans in ``scene.frame = previous`` unless --frame says otherwise; --noise sets
+    every arm's sensor; a configuration's frame or sensor that the options contradict is refused."""
+    from tpvp.cli import EVERY, build_parser
+    from tpvp.commands.experiments import season_setup
+
+    def configs(*argv):
+        config, cases = season_setup(build_parser(EVERY).parse_args(["experiments", "season", "--quick", *argv]))
+        return [case.config(config) for case in cases]
+
+    assert {(c.scene.frame, c.sensor.noise) for c in configs()} == {("previous", "ideal")}
+    assert {(c.scene.frame, c.sensor.noise) for c in configs("--frame", "current", "--noise", "phone-lidar")} == \
+        {("current", "phone-lidar")}
+    assert {(c.scene.frame, c.sensor.noise) for c in configs("--config", "realistic")} == {("previous", "arm-rgbd")}
+    with pytest.raises(ConfigError, match="scene.frame='previous'.*--frame"):
+        configs("--config", "realistic", "--frame", "current")
+    with pytest.raises(ConfigError, match="--noise phone-lidar and sensor.noise='arm-rgbd'"):
+        configs("--noise", "phone-lidar", "--set", "sensor.noise=arm-rgbd")
+    with pytest.raises(ConfigError, match="--noise applies to the plants' season"):
+        configs("--rows", "--noise", "phone-lidar")

@@ -6,7 +6,7 @@ from pathlib import Path
 
 from tpvp.cli_common import OPTION, case_options, config_overrides, resolved_config
 from tpvp.config import PlantConfig
-from tpvp.config_loading import flatten_keys, to_dict
+from tpvp.config_loading import flatten_keys, to_dict, with_overrides
 from tpvp.errors import ConfigError, TpvpError
 from tpvp.commands.rows import row_config, row_options
 from tpvp.experiments import plants as plant_experiments
@@ -14,6 +14,7 @@ from tpvp.experiments import rows as row_experiments
 from tpvp.experiments import season
 from tpvp.experiments.results import markdown, write_results
 from tpvp.scene.boxes import ROOMS
+from tpvp.sensor.noise import NOISE_PROFILES
 from tpvp.simulate.row_cases import default_row_cases
 
 
@@ -45,10 +46,11 @@ def _experiments_rows(args) -> int:
 
 #: Options of the plants' season (their defaults) and of the rows' (``--rows``): given to the other, refused.
 PLANT_SEASON_ONLY = {"--species": list(season.SPECIES), "--view-spaces": list(season.VIEW_SPACES),
-                     "--replan-after": list(season.REPLAN_AFTER), "--dataset": None, "--plants": None}
+                     "--replan-after": list(season.REPLAN_AFTER), "--dataset": None, "--plants": None,
+                     "--frame": season.FRAME, "--noise": None}
 ROW_SEASON_ONLY = {"--rooms": list(season.ROOMS)}
 #: Keys the plants' season sets per case, each from its own option (a sweep over its values).
-SEASON_CASE_KEYS = {"view_space": "--view-spaces", "selection.replan_after": "--replan-after"}
+SEASON_CASE_KEYS = {"view_space": "--view-spaces", "selection.replan_after": "--replan-after", "scene.frame": "--frame"}
 
 
 def _given(args, options: dict) -> str | None:
@@ -75,23 +77,28 @@ def season_setup(args):
     if flag := _given(args, ROW_SEASON_ONLY):
         raise ConfigError(f"{flag} applies to the rows' season (--rows); without it the season is of plants")
     config = resolved_config(args)
+    if args.noise is not None:  # one profile for every arm's captures
+        if "sensor.noise" in config_overrides(args) and config.sensor.noise != args.noise:
+            raise ConfigError(f"--noise {args.noise} and sensor.noise={config.sensor.noise!r} (--set) disagree; "
+                              f"give one")
+        config = with_overrides(config, {"sensor.noise": args.noise})
     if config.setting != "plant":
         raise TpvpError(f"the plants' season plans plants; configuration {config.name!r} is a {config.setting} one "
                         f"(--rows for the rows' season)")
     given, default = config_overrides(args), flatten_keys(to_dict(PlantConfig()))
     values = flatten_keys(to_dict(config))
-    for key, flag in SEASON_CASE_KEYS.items():
-        if key in given or values[key] != default[key]:
+    for key, flag in SEASON_CASE_KEYS.items():  # a value the option gives anyway (realistic's frame) is no conflict
+        if (key in given or values[key] != default[key]) and values[key] != getattr(args, flag[2:], None):
             raise ConfigError(f"{key}={values[key]!r} (--config or --set): the season sets it per case from {flag}; "
                               f"give {flag} instead")
     key = "selection.coverage_target"
     target = values[key] if key in given or values[key] != default[key] else season.COVERAGE_TARGET
     if args.dataset is not None:
         return config, season.dataset_season_cases(args.dataset, args.plants, args.quick, tuple(args.view_spaces),
-                                                   target, tuple(args.replan_after_values))
+                                                   target, tuple(args.replan_after_values), args.frame)
     return config, season.season_cases(args.quick, tuple(args.species), tuple(args.seeds),
                                        args.sessions or season.SESSIONS, tuple(args.view_spaces), target,
-                                       tuple(args.replan_after_values))
+                                       tuple(args.replan_after_values), args.frame)
 
 
 def _experiments_season(args) -> int:
@@ -179,6 +186,12 @@ def experiments_arguments(experiments) -> None:
         seasons, nargs="+", dest="replan_after_values", default=list(season.REPLAN_AFTER),
         help="re-plan each session's plan from its captures after every K planned views; several "
              "values run the season once per value, 0 = plan once (default: %(default)s)")
+    seasons.add_argument("--frame", default=season.FRAME, choices=("previous", "current"),
+                         help="each session's planning frame: from its prior and first capture, as a robot knows it, "
+                              "or fitted to today's full scan (the paper's tables) (default: %(default)s)")
+    seasons.add_argument("--noise", default=None, choices=NOISE_PROFILES.names(), metavar="PROFILE",
+                         help=f"the sensor of every arm's captures, the own arm's fused prior included: "
+                              f"{', '.join(NOISE_PROFILES.names())} (default: the configuration's sensor.noise)")
     seasons.add_argument("--arms", nargs="+", default=None,
                          help=f"priors to plan from ({season.SEASON_ARMS.describe()})")
     seasons.add_argument("--quick", action="store_true",

@@ -2,12 +2,14 @@
 
 Session 1 plans day 2 from day 1's full scan. From session 2 on, each arm plans day k from its own
 prior: ``truth``, the previous day's ground-truth scan (the paper's protocol), ``own``, what the
-previous session reconstructed from its own executed views (the voxels they saw of that day's
-plant, as ``tpvp session export`` writes it): the closed loop a monitoring robot runs, or ``none``:
-no prior, the geometric NBV until its true coverage reaches the coverage target (a stopping rule
-on the ground truth: a lower bound for a robot without a prior). Every
-session is measured on today's ground truth: views, true coverage, path, the Chamfer distance of
-what the session reconstructed to today's plant, the registration residual, and the share of
+previous session reconstructed from its own executed views: the model fused from their depth images
+through the configured sensor (``sensor.noise``) by the code that fuses a phone's capture
+(:func:`tpvp.simulate.depth_captures.fused_captures`), the closed loop a monitoring robot runs, or
+``none``: no prior, the geometric NBV until its true coverage reaches the coverage target (a
+stopping rule on the ground truth: a lower bound for a robot without a prior). Each session plans
+in the frame a robot knows (``scene.frame = previous``: from its prior and the first capture).
+Every session is measured on today's ground truth: views, true coverage, path, the Chamfer distance
+of the model fused from its captures to today's plant, the registration residual, and the share of
 today's plant the registered prior held nothing near.
 """
 
@@ -29,13 +31,13 @@ from tpvp.experiments.baselines import nbv_curve
 from tpvp.simulate.greenhouse import build_row_scene, execute, observed_points, run_row_case
 from tpvp.experiments.plants import dataset_table
 from tpvp.io import read_point_cloud
+from tpvp.simulate.depth_captures import fused_captures
 from tpvp.simulate.single_plant import build_scene, run_case
 from tpvp.metrics import chamfer_distance
 from tpvp.nbv.blockwise import blockwise_nbv
 from tpvp.registry import Registry
 from tpvp.scene import voxels
 from tpvp.scene.boxes import room_config
-from tpvp.scene.frame import scan_points
 from tpvp.synthetic.greenhouse import generate_row_sessions
 from tpvp.synthetic.plants import generate_growth_series
 from tpvp.synthetic.scan import reference_points
@@ -53,15 +55,10 @@ SESSIONS = 6
 SEEDS = (0, 1, 2)
 VIEW_SPACES = ("hemisphere", "sphere")
 REPLAN_AFTER = (0, 1)  # plan once; re-plan after every planned view (as the re-planning rule was calibrated)
+FRAME = "previous"  # scene.frame of every session: the one a robot knows (its prior and first capture)
 QUICK = {"species": ("tomato",), "seeds": (0,), "sessions": 3}
 SEASON_COLUMNS = ("session", "arm", "views", "coverage", "path_length_m", "chamfer_fused_mm",
                   "registration_chamfer_mm", "prior_missing", "prior_points")
-
-
-def reconstruction(scene, views) -> np.ndarray:
-    """What ``views`` saw of today's plant: the centres of the ground-truth voxels they see
-    (planning frame), as a session's fused captures are."""
-    return scene.grid.centres[covered_voxels(scene.truth_visibility, list(views))]
 
 
 def held_near(points: np.ndarray, prior: np.ndarray, voxel: float) -> np.ndarray:
@@ -93,8 +90,8 @@ def _without_prior(scene, config: PlantConfig):
 @dataclass(frozen=True, eq=False)
 class SeasonSession:
     """One session of one arm: today's case (``scene``: the arm's prior registered against today's
-    ground truth), the prior it planned from (scan frame), the views it executed, what they saw of
-    today's plant (``fused``, planning frame), the registered prior (``warped``, planning frame;
+    ground truth), the prior it planned from (scan frame), the views it executed, the model fused
+    from their captures (``fused``, planning frame), the registered prior (``warped``, planning frame;
     None for ``none``) and the session's row of :data:`SEASON_COLUMNS`."""
 
     scene: object
@@ -160,12 +157,13 @@ def season_sessions(series, config: PlantConfig = PlantConfig(), arms=ARMS, name
             registration = per_mm * result.chamfer_after
             warped = result.clouds["warped"]
             missing = prior_missing(scene, warped, config.gt_resolution)
-        fused = reconstruction(scene, order)
+        fused = fused_captures(scene, order)  # scan frame: the next own prior
+        planning = fused @ scene.plant_from_scan[:3, :3].T + scene.plant_from_scan[:3, 3]
         row = {"session": day + 1, "arm": arm, "views": views, "coverage": coverage,
-               "path_length_m": path_length, "chamfer_fused_mm": per_mm * chamfer_distance(fused, scene.current),
+               "path_length_m": path_length, "chamfer_fused_mm": per_mm * chamfer_distance(planning, scene.current),
                "registration_chamfer_mm": registration, "prior_missing": missing,
                "prior_points": 0 if arm == "none" else len(prior)}
-        return SeasonSession(scene, prior, list(order), fused, warped, row), scan_points(scene.plant_from_scan, fused)
+        return SeasonSession(scene, prior, list(order), planning, warped, row), fused
 
     return chained_sessions(series, arms, name, session)
 
@@ -187,33 +185,35 @@ class SeasonCase:
     view_space: str = "hemisphere"
     coverage_target: float = COVERAGE_TARGET
     replan_after: int = 0  # selection.replan_after of every session's plan (the none arm has no plan)
+    frame: str = FRAME  # scene.frame: from what the robot knows (its prior), or "current" (today's scan)
     files: tuple = ()  # a dataset plant's scans, day by day (metric point clouds); empty: generated
     plant: str = ""  # the dataset's plant name
 
     def config(self, base: PlantConfig) -> PlantConfig:
         return with_overrides(base, {"view_space": self.view_space, "selection.coverage_target": self.coverage_target,
-                                     "selection.replan_after": self.replan_after})
+                                     "selection.replan_after": self.replan_after, "scene.frame": self.frame})
 
     def labels(self) -> dict:
         return {"plant": self.plant or f"{self.species}-generated-{self.seed}", "species": self.species,
                 "seed": self.seed, "view_space": self.view_space, "coverage_target": self.coverage_target,
-                "replan_after": self.replan_after}
+                "replan_after": self.replan_after, "frame": self.frame}
 
 
 def season_cases(quick: bool = False, species=SPECIES, seeds=SEEDS, sessions: int = SESSIONS,
                  view_spaces=VIEW_SPACES, coverage_target: float = COVERAGE_TARGET,
-                 replan_after=REPLAN_AFTER) -> list[SeasonCase]:
+                 replan_after=REPLAN_AFTER, frame: str = FRAME) -> list[SeasonCase]:
     """The full protocol's seasons (by default), or the quick ones (one tomato, 3 sessions, each
     view space and re-planning asked)."""
     if quick:
         species, seeds, sessions = QUICK["species"], QUICK["seeds"], QUICK["sessions"]
     return [SeasonCase(s, int(seed), int(sessions), view_space=v, coverage_target=float(coverage_target),
-                       replan_after=int(k))
+                       replan_after=int(k), frame=frame)
             for k in replan_after for v in view_spaces for s in species for seed in seeds]
 
 
 def dataset_season_cases(folder, plants=None, quick: bool = False, view_spaces=VIEW_SPACES,
-                         coverage_target: float = COVERAGE_TARGET, replan_after=REPLAN_AFTER) -> list[SeasonCase]:
+                         coverage_target: float = COVERAGE_TARGET, replan_after=REPLAN_AFTER,
+                         frame: str = FRAME) -> list[SeasonCase]:
     """Every plant of a prepared dataset (``python -m data_tools pheno4d prepare``: ``pairs.csv``
     and its metric clouds), its scans in date order, one season per plant (or only ``plants``;
     ``quick``: the first plant's first three scans)."""
@@ -230,7 +230,8 @@ def dataset_season_cases(folder, plants=None, quick: bool = False, view_spaces=V
                                  f"({', '.join(f'{a} then {b}' for a, b in days if str(a) != str(b))})")
         files = tuple(str(Path(folder) / f) for f in files)[:3 if quick else None]
         cases += [SeasonCase(str(rows["species"].iloc[0]).lower(), 0, len(files), view_space=v,
-                             coverage_target=float(coverage_target), replan_after=int(k), files=files, plant=str(plant))
+                             coverage_target=float(coverage_target), replan_after=int(k), files=files, plant=str(plant),
+                             frame=frame)
                   for k in replan_after for v in view_spaces]
         if quick:
             break

@@ -17,6 +17,7 @@ from tpvp.errors import ConfigError
 from tpvp.scene.frame import scan_points
 from tpvp.sensor.noise import apply_depth_noise, noise_profile
 from tpvp.sensor.sensor import depth_image
+from tpvp.simulate.depth_captures import rendered_depth
 from tpvp.simulate.greenhouse import build_row_scene, noisy_capture, observed_points
 from tpvp.simulate.world import build_scene
 from tpvp.session.plant import PlantSession
@@ -41,15 +42,13 @@ class StandInCamera:
         :func:`tpvp.sensor.noise.apply_depth_noise`, drawn from ``default_rng([seed, view, capture])``
         as :meth:`~tpvp.simulate.world.Scene.observe` draws a cloud's). The pose error is left out: a
         session places an image at the pose it asked for, and the stand-in renders it there."""
-        scene, space = self.scene, self.scene.view_space
-        sensor = replace(scene.sensor, model="pixel", pixel_stride=1)
-        depth, _ = depth_image(scene.grid, space.positions[view], space.look_ats[view], sensor)
-        depth[~np.isfinite(depth)] = 0.0
+        scene = self.scene
+        depth = rendered_depth(scene, view)
         profile = noise_profile(self.config.sensor.noise)
         if not profile.ideal:  # the profile's figures are metres of the sensor's world
             rng = np.random.default_rng([int(scene.seed), int(view), int(capture)])
-            metres, _ = apply_depth_noise(profile, depth / scene.per_metre, sensor.intrinsics, np.eye(4), int(capture),
-                                          len(space), rng, drift_seed=int(scene.seed))
+            metres, _ = apply_depth_noise(profile, depth / scene.per_metre, scene.sensor.intrinsics, np.eye(4),
+                                          int(capture), len(scene.view_space), rng, drift_seed=int(scene.seed))
             depth = metres * scene.per_metre
         depth = depth / scene.scan_scale
         depth[~(depth > 0)] = np.nan
