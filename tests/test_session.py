@@ -107,6 +107,39 @@ def test_the_exported_model_is_the_simulators_fused_model(tmp_path, pair):
     assert np.array_equal(exported, fused)
 
 
+def test_a_depth_session_exports_its_images_fused(tmp_path, pair):
+    """Depth captures keep their images; export fuses them (tpvp.fusion, a plant's defaults) at the
+    poses the session asked for, keeps what lies near the previous model and above the table, and
+    the model lies on today's scan; ``session check`` counts the images as the captures' files."""
+    from scipy.spatial import cKDTree
+
+    from tpvp.fusion.tsdf import DepthFrame, fuse_frames, fusion_config
+    from tpvp.io import read_point_cloud
+    from tpvp.scene.frame import scan_points
+
+    config = make_config("plant")
+    camera = StandInCamera(*pair, config)
+    session = Session.start(tmp_path / "session", pair[0], config, "tomato_0305")
+    _play(session, camera, "depth")
+    model = read_point_cloud(session.export(tmp_path / "today.ply"), units="m")
+    # by hand: the stand-in's images at the views' poses (world frame), fused, cropped
+    frames = [DepthFrame(np.nan_to_num(camera.depth(c["view"]), nan=0.0).astype(np.float32), D435,
+                         session.view_pose(c["view"])) for c in session.captures]
+    fused = fuse_frames(frames, fusion_config("plant"), progress=False).points
+    planning = session.scene.to_planning(fused)
+    lo, hi = session.scene.previous.min(axis=0), session.scene.previous.max(axis=0)
+    near = np.all((planning >= lo - 0.5 * (hi - lo).max()) & (planning <= hi + 0.5 * (hi - lo).max()), axis=1)
+    top = session.scene.table_points[:, 2].max() + 0.5 * session.config.scene.table_resolution
+    above = (np.floor(planning[:, 2] / config.gt_resolution) + 1) * config.gt_resolution > top + 1e-9 * config.gt_resolution
+    assert np.allclose(model, fused[near & above])
+    today = scan_points(camera.scene.plant_from_scan, camera.scene.current)
+    assert np.percentile(cKDTree(today).query(model)[0], 95) <= 0.005  # within a fusion voxel of today's scan
+    assert Session.problems(session.folder) == []
+    (session.folder / "captures" / "000_depth.npz").unlink()
+    (problem,) = Session.problems(session.folder)
+    assert "000_depth.npz" in problem.line(session.folder) and problem.repair.startswith("drop capture 1")
+
+
 def test_the_command_line_session(tmp_path, pair, capsys):
     camera = StandInCamera(*pair, make_config("plant"))
     folder = tmp_path / "session"

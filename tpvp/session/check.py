@@ -78,10 +78,41 @@ def centroid_file(record: dict) -> str:
     return record["file"].replace(".npy", "_centroids.npy")
 
 
+def depth_file(record: dict) -> str:
+    """The file of a depth capture's image, its intrinsics and pose (what ``export`` fuses)."""
+    return record["file"].replace(".npy", "_depth.npz")
+
+
+def capture_files(record: dict) -> list[str]:
+    """Every file of a capture: its voxel keys, their centroids and, for a depth image that kept
+    it, the image."""
+    return [record["file"], centroid_file(record), *([depth_file(record)] if record.get("depth_image") else [])]
+
+
 def capture_number(name: str) -> int | None:
-    """The number of ``captures/NNN.npy`` or ``captures/NNN_centroids.npy``; None for other names."""
-    match = re.fullmatch(r"captures/(\d+)(?:_centroids)?\.npy", name)
+    """The number of ``captures/NNN.npy``, ``NNN_centroids.npy`` or ``NNN_depth.npz``; None for other names."""
+    match = re.fullmatch(r"captures/(\d+)(?:(?:_centroids)?\.npy|_depth\.npz)", name)
     return int(match.group(1)) if match else None
+
+
+#: What a depth capture's image file holds: the depth (H, W, metres, 0: none), the pinhole
+#: (fx, fy, cx, cy, width, height) and the camera-to-world pose it was placed at (4, 4).
+DEPTH_ARRAYS = {"depth": 2, "intrinsics": 1, "camera_to_world": 2}
+
+
+def _depth_problem(path: Path) -> str | None:
+    """Why ``path`` is not a depth capture's image file; None if it is."""
+    if not path.is_file():
+        return "is missing (deleted?)"
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            arrays = {name: data[name] for name in DEPTH_ARRAYS}
+    except (OSError, ValueError, EOFError, KeyError) as exc:
+        return f"is damaged (truncated? {str(exc).splitlines()[0][:80]})"
+    if any(arrays[name].ndim != ndim for name, ndim in DEPTH_ARRAYS.items()) or arrays["intrinsics"].shape != (6,) \
+            or arrays["camera_to_world"].shape != (4, 4) or not all(np.isfinite(a).all() for a in arrays.values()):
+        return "does not hold a depth image, its intrinsics and its pose"
+    return None
 
 
 def is_session_folder(folder: Path) -> bool:
@@ -186,8 +217,9 @@ def _capture_problems(folder: Path, index: int, record) -> list[Problem]:
     if bad:
         return [Problem(f"{where} has no valid {', '.join(repr(b) for b in bad)} (edited by hand?)",
                         f"restore {folder / STATE} from a backup")]
-    for name, integer in ((file, True), (centroid_file(record), False)):
-        why = _load(folder / name, integer, count)
+    for name, integer in ((file, True), (centroid_file(record), False), *([(depth_file(record), None)]
+                                                                          if record.get("depth_image") else [])):
+        why = _depth_problem(folder / name) if integer is None else _load(folder / name, integer, count)
         if why is not None:
             return [Problem(f"{folder / name} (capture {index + 1}, view {view}) {why}",
                             repair=f"drop capture {index + 1} (view {view})",
@@ -383,7 +415,7 @@ def folder_problems(folder, kinds) -> list[Problem]:
         malformed |= any(p.repair is None for p in found)
         problems += found
         if not malformed:
-            named |= {record["file"], centroid_file(record)}
+            named |= set(capture_files(record))
     captures = folder / "captures"
     if captures.is_dir() and not malformed:  # which files are orphans is known once every record is sound
         for path in sorted(captures.rglob("*")):
@@ -402,7 +434,7 @@ def repaired_state(state: dict, problems: list[Problem]) -> tuple[dict, list[str
     remove = [p.remove_file for p in problems if p.remove_file is not None]
     for index in sorted(dropped):
         record = state["captures"][index]
-        remove += [record["file"], centroid_file(record)]
+        remove += capture_files(record)
     captures = [c for i, c in enumerate(state["captures"]) if i not in dropped]
     new = dict(state, captures=captures)
     if any(p.drop_plan for p in problems):

@@ -29,10 +29,11 @@ from tpvp.errors import BusyError, ConfigError, InputFileError, PointCloudError,
 from tpvp.io import atomic_write_bytes, atomic_write_text, write_point_cloud
 from tpvp.io.publish import hold_folder, staged_folder
 from tpvp.scene import voxels
-from tpvp.sensor.camera import look_at_rotation, rotation_to_quaternion
+from tpvp.fusion.tsdf import DepthFrame, fuse_frames, fusion_config
+from tpvp.sensor.camera import Intrinsics, look_at_rotation, rotation_to_quaternion
 from tpvp.session.captures import Pose, back_project, surface_voxel_keys
 from tpvp.session.check import (DROP_PLAN, FORMAT, ORGANS_FILE, PREDICTION_FILE, STATE, VERSION, Problem,
-                                 capture_number, centroid_file, folder_problems, prediction_views, state_text)
+                                 capture_number, centroid_file, depth_file, folder_problems, prediction_views, state_text)
 
 #: How another command is told to wait for the folder: the session's own advice, not another folder.
 BUSY_ADVICE = "run this command again when that one has finished (--wait SECONDS waits longer)"
@@ -343,19 +344,29 @@ class Session:
                                   f"depth); is it the depth of view {view}, in metres (--intrinsics depth_scale)?")
         keys = surface_voxel_keys(planning[near], rays[near] @ self.scene.plant_from_scan[:3, :3].T,
                                   self.config.gt_resolution)
-        return self._add_voxels(keys, planning[near], view, source, "depth", len(points))
+        image = np.nan_to_num(np.asarray(depth, dtype=np.float32), nan=0.0, posinf=0.0, neginf=0.0)
+        k = intrinsics
+        frame = {"depth": image, "camera_to_world": self.view_pose(view),
+                 "intrinsics": np.array([k.fx, k.fy, k.cx, k.cy, k.width, k.height], dtype=np.float64)}
+        return self._add_voxels(keys, planning[near], view, source, "depth", len(points), frame)
 
-    def _add_voxels(self, keys, points, view, source, kind, total) -> dict:
+    def _add_voxels(self, keys, points, view, source, kind, total, depth_frame=None) -> dict:
         """Record a capture: its voxels (keys of ``points``, planning frame; code order), those the
-        plants hold, and the centroid of its points in each (``captures/NNN_centroids.npy``)."""
+        plants hold, the centroid of its points in each (``captures/NNN_centroids.npy``) and, for a
+        depth image, the image with its intrinsics and pose (``captures/NNN_depth.npz``)."""
         codes, centroids = voxels.code_centroids(keys, points)
         keys = voxels.decode_keys(codes)
         kept = self._keep(keys)
         keys, centroids = keys[kept], centroids[kept]
         record = {"view": int(view), "file": f"captures/{self._next_capture_number():03d}.npy", "source": str(source),
                   "kind": kind, "points": int(total), "points_kept": int(len(points)), "voxels": int(len(keys)), "added_utc": _now()}
-        self.commit(dict(self.state, captures=[*self.captures, record]),
-                    {record["file"]: npy_bytes(keys), centroid_file(record): npy_bytes(centroids)})
+        files = {record["file"]: npy_bytes(keys), centroid_file(record): npy_bytes(centroids)}
+        if depth_frame is not None:
+            record["depth_image"] = True
+            buffer = BytesIO()
+            np.savez_compressed(buffer, **depth_frame)
+            files[depth_file(record)] = buffer.getvalue()
+        self.commit(dict(self.state, captures=[*self.captures, record]), files)
         return record
 
     def _next_capture_number(self) -> int:
@@ -379,12 +390,36 @@ class Session:
     # -- today's model ----------------------------------------------------------------------------
 
     def fused_model(self) -> np.ndarray:
-        """Today's model: the voxel centres of every capture (distinct, key order), world frame."""
+        """Today's model, world frame: the depth images kept with their captures fused
+        (:func:`tpvp.fusion.fuse_frames` at the session's scale, the code of ``tpvp capture fuse``
+        and of the simulated season), only what lies near the plants, with the voxel centres of
+        every other capture (distinct, key order)."""
         keys = self.capture_keys()
         if not keys:
             raise ConfigError(f"{self.folder}: no capture yet: nothing to export")
-        fused = voxels.unique_keys(np.concatenate(keys))
-        return self.scene.to_scan(voxels.key_centres(fused, self.config.gt_resolution))
+        images = [c.get("depth_image", False) for c in self.captures]
+        others = [k for k, image in zip(keys, images) if not image]
+        model = (self.scene.to_scan(voxels.key_centres(voxels.unique_keys(np.concatenate(others)),
+                                                       self.config.gt_resolution)) if others else np.zeros((0, 3)))
+        if any(images):
+            config = fusion_config(self.kind)
+            frames = [self.depth_frame(c, config.max_depth) for c, image in zip(self.captures, images) if image]
+            fused = fuse_frames(frames, config, progress=False, source=str(self.folder)).points
+            planning = self.scene.to_planning(fused)
+            near = self._near(planning)
+            near[near] = self._keep(voxels.voxel_keys(planning[near], self.config.gt_resolution))
+            model = np.concatenate([fused[near], model])
+        return model
+
+    def depth_frame(self, record: dict, max_depth: float) -> DepthFrame:
+        """A depth capture's image at the pose it was placed (world frame), as the fusion takes it:
+        the background beyond ``max_depth`` (m) dropped."""
+        with np.load(self.folder / depth_file(record), allow_pickle=False) as data:
+            fx, fy, cx, cy, width, height = data["intrinsics"]
+            depth = np.where(data["depth"] <= max_depth, data["depth"], np.float32(0.0))
+            return DepthFrame(depth, Intrinsics(fx=fx, fy=fy, cx=cx, cy=cy, width=int(width),
+                                                        height=int(height)),
+                              data["camera_to_world"], name=record["file"])
 
     def export(self, path) -> Path:
         """Write today's fused model (world frame; PLY/PCD/XYZ by the extension)."""
