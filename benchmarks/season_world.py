@@ -33,40 +33,53 @@ PROFILES = ("arm-rgbd", "phone-lidar")
 ARMS = ("truth", "own")
 
 
-def run(profiles, quick: bool, workers: int, cache) -> pd.DataFrame:
-    cases = season.season_cases(quick, replan_after=(0,), frame="previous")
+def run(profiles, quick: bool, workers: int, cache, seeds=season.SEEDS, carry=(season.CARRY_UNSEEN,)) -> pd.DataFrame:
+    """Every profile's seasons: the truth arm once, the own arm per ``carry`` (season_sessions' carry_unseen)."""
     rows = []
     for profile in profiles:
         start = time.perf_counter()
         config = make_config("plant", {"sensor.noise": profile})
-        raw = season.run_season_experiments(cases, ARMS, config, cache_dir=cache, workers=workers)
-        print(f"noise {profile}: {len(raw)} rows in {(time.perf_counter() - start) / 60:.1f} min")
-        rows.append(raw.rename(columns={"method": "arm"}).assign(noise=profile))
+        for i, keep in enumerate(carry):
+            cases = season.season_cases(quick, seeds=seeds, replan_after=(0,), frame="previous", carry_unseen=keep)
+            arms = ARMS if i == 0 else ("own",)
+            raw = season.run_season_experiments(cases, arms, config, cache_dir=cache, workers=workers)
+            raw = raw.rename(columns={"method": "arm"}).assign(noise=profile)
+            if len(carry) > 1:  # the own arm named by its prior
+                raw.loc[raw["arm"] == "own", "arm"] = "own (carried)" if keep else "own (fused only)"
+            rows.append(raw)
+        print(f"noise {profile}: {sum(len(r) for r in rows if r['noise'].iloc[0] == profile)} rows in "
+              f"{(time.perf_counter() - start) / 60:.1f} min")
     return pd.concat(rows, ignore_index=True)
 
 
 def targets(raw: pd.DataFrame) -> pd.DataFrame:
-    """One row per profile and view space: the closed loop against the truth arm."""
+    """One row per profile, view space and own arm: the closed loop against the truth arm."""
     out = []
     for (profile, space), group in raw.groupby(["noise", "view_space"], sort=False):
-        arm = {name: rows for name, rows in group.groupby("arm")}
-        own, truth = arm["own"], arm["truth"]
-        drift = own.groupby("plant").apply(lambda s: s.sort_values("session")["chamfer_fused_mm"].iloc[-1]
-                                           - s.sort_values("session")["chamfer_fused_mm"].iloc[0])
-        out.append({"noise": profile, "view_space": space, "seasons": own["plant"].nunique(),
-                    "own coverage %": 100 * own["coverage"].mean(), "truth coverage %": 100 * truth["coverage"].mean(),
-                    "mean gap (points, >= -0.3)": 100 * (own["coverage"].mean() - truth["coverage"].mean()),
-                    "own worst %": 100 * own["coverage"].min(), "truth worst %": 100 * truth["coverage"].min(),
-                    "worst gap (points, >= -0.5)": 100 * (own["coverage"].min() - truth["coverage"].min()),
-                    "own / truth views (<= 1.10)": own["views"].sum() / truth["views"].sum(),
-                    "own fused Chamfer first mm": own[own["session"] == own["session"].min()]["chamfer_fused_mm"].mean(),
-                    "own Chamfer growth mm (max, <= 1)": drift.max(),
-                    "truth Chamfer growth mm (max)": truth.groupby("plant").apply(
-                        lambda s: s.sort_values("session")["chamfer_fused_mm"].iloc[-1]
-                        - s.sort_values("session")["chamfer_fused_mm"].iloc[0]).max(),
-                    "own registration mm": own["registration_chamfer_mm"].mean(),
-                    "truth registration mm": truth["registration_chamfer_mm"].mean()})
+        truth = group[group["arm"] == "truth"]
+        for name in [a for a in group["arm"].unique() if a.startswith("own")]:
+            out.append(_against_truth(profile, space, name, group[group["arm"] == name], truth))
     return pd.DataFrame(out)
+
+
+def _growth(rows: pd.DataFrame) -> float:
+    """The largest growth over the plants of the fused model's Chamfer distance, last session minus the first."""
+    ordered = rows.sort_values("session").groupby("plant")["chamfer_fused_mm"]
+    return float((ordered.last() - ordered.first()).max())
+
+
+def _against_truth(profile, space, name, own, truth) -> dict:
+    return {"noise": profile, "view_space": space, "arm": name, "seasons": own["plant"].nunique(),
+            "own coverage %": 100 * own["coverage"].mean(), "truth coverage %": 100 * truth["coverage"].mean(),
+            "mean gap (points, >= -0.3)": 100 * (own["coverage"].mean() - truth["coverage"].mean()),
+            "own worst %": 100 * own["coverage"].min(), "truth worst %": 100 * truth["coverage"].min(),
+            "worst gap (points, >= -0.5)": 100 * (own["coverage"].min() - truth["coverage"].min()),
+            "own / truth views (<= 1.10)": own["views"].sum() / truth["views"].sum(),
+            "own prior missing %": 100 * own[own["session"] > own["session"].min()]["prior_missing"].mean(),
+            "truth prior missing %": 100 * truth[truth["session"] > truth["session"].min()]["prior_missing"].mean(),
+            "own Chamfer growth mm (max, <= 1)": _growth(own), "truth Chamfer growth mm (max)": _growth(truth),
+            "own registration mm": own["registration_chamfer_mm"].mean(),
+            "truth registration mm": truth["registration_chamfer_mm"].mean()}
 
 
 def main() -> None:
@@ -76,12 +89,17 @@ def main() -> None:
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--cache", type=Path, default=None, help="experiment cache (default: none)")
     parser.add_argument("--results", type=Path, default=None)
+    parser.add_argument("--calibrate", action="store_true",
+                        help="calibration seeds 10 and 11, the own prior with and without the unseen parts carried "
+                             "(writes season_world_calibrate.md)")
     args = parser.parse_args()
     start = time.perf_counter()
-    raw = run(args.profiles, args.quick, args.workers, args.cache)
+    seeds, carry = ((10, 11), (False, True)) if args.calibrate else (season.SEEDS, (season.CARRY_UNSEEN,))
+    raw = run(args.profiles, args.quick, args.workers, args.cache, seeds, carry)
     table = targets(raw)
     print(table.to_string(index=False))
-    results = args.results or (RESULTS.with_name("season_world_quick.md") if args.quick else RESULTS)
+    name = "season_world" + ("_calibrate" if args.calibrate else "") + ("_quick" if args.quick else "")
+    results = args.results or RESULTS.with_name(f"{name}.md")
     columns = ["noise", "view_space", "plant", "session", "arm", "views", "coverage", "path_length_m",
                "chamfer_fused_mm", "registration_chamfer_mm", "prior_missing", "prior_points"]
     atomic_write_text(results.with_suffix(".csv"), raw[columns].to_csv(index=False, float_format="%.6g"))

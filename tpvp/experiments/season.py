@@ -31,6 +31,7 @@ from tpvp.experiments.baselines import nbv_curve
 from tpvp.simulate.greenhouse import build_row_scene, execute, observed_points, run_row_case
 from tpvp.experiments.plants import dataset_table
 from tpvp.io import read_point_cloud
+from tpvp.scene.frame import scan_points
 from tpvp.simulate.depth_captures import fused_captures
 from tpvp.simulate.single_plant import build_scene, run_case
 from tpvp.metrics import chamfer_distance
@@ -56,6 +57,7 @@ SEEDS = (0, 1, 2)
 VIEW_SPACES = ("hemisphere", "sphere")
 REPLAN_AFTER = (0, 1)  # plan once; re-plan after every planned view (as the re-planning rule was calibrated)
 FRAME = "previous"  # scene.frame of every session: the one a robot knows (its prior and first capture)
+CARRY_UNSEEN = True  # the own prior keeps what the views did not look at again (season_sessions)
 QUICK = {"species": ("tomato",), "seeds": (0,), "sessions": 3}
 SEASON_COLUMNS = ("session", "arm", "views", "coverage", "path_length_m", "chamfer_fused_mm",
                   "registration_chamfer_mm", "prior_missing", "prior_points")
@@ -141,9 +143,12 @@ def chained_sessions(series, arms, name: str, session):
         own = next_own
 
 
-def season_sessions(series, config: PlantConfig = PlantConfig(), arms=ARMS, name: str = "plant"):
+def season_sessions(series, config: PlantConfig = PlantConfig(), arms=ARMS, name: str = "plant",
+                    carry_unseen: bool = CARRY_UNSEEN):
     """A plant's sessions per arm (:func:`chained_sessions`). ``series``: its scans in order
-    (points, metres), day 1 first."""
+    (points, metres), day 1 first. ``carry_unseen``: the next ``own`` prior also keeps the points
+    of the registered prior that today's fused model holds nothing near (:func:`held_near`): a
+    model updated where the views looked, kept where they did not."""
     def session(prior, today, day, arm):
         scene = build_scene(prior, today, config, names=(f"{name} day {day} ({arm} prior)", f"{name} day {day + 1}"))
         per_mm = 1e3 / scene.scan_scale  # planning-frame metres -> the scans' millimetres
@@ -159,6 +164,9 @@ def season_sessions(series, config: PlantConfig = PlantConfig(), arms=ARMS, name
             missing = prior_missing(scene, warped, config.gt_resolution)
         fused = fused_captures(scene, order)  # scan frame: the next own prior
         planning = fused @ scene.plant_from_scan[:3, :3].T + scene.plant_from_scan[:3, 3]
+        if carry_unseen and warped is not None:
+            unseen = warped[~held_near(warped, planning, config.gt_resolution)]
+            fused = np.concatenate([fused, scan_points(scene.plant_from_scan, unseen)])
         row = {"session": day + 1, "arm": arm, "views": views, "coverage": coverage,
                "path_length_m": path_length, "chamfer_fused_mm": per_mm * chamfer_distance(planning, scene.current),
                "registration_chamfer_mm": registration, "prior_missing": missing,
@@ -168,9 +176,10 @@ def season_sessions(series, config: PlantConfig = PlantConfig(), arms=ARMS, name
     return chained_sessions(series, arms, name, session)
 
 
-def run_season(series, config: PlantConfig = PlantConfig(), arms=ARMS, name: str = "plant") -> pd.DataFrame:
+def run_season(series, config: PlantConfig = PlantConfig(), arms=ARMS, name: str = "plant",
+               carry_unseen: bool = CARRY_UNSEEN) -> pd.DataFrame:
     """One row per session (2 .. n: the day planned) and arm (:func:`season_sessions`)."""
-    return pd.DataFrame([session.row for session in season_sessions(series, config, arms, name)],
+    return pd.DataFrame([session.row for session in season_sessions(series, config, arms, name, carry_unseen)],
                         columns=list(SEASON_COLUMNS))
 
 
@@ -185,6 +194,7 @@ class SeasonCase:
     view_space: str = "hemisphere"
     coverage_target: float = COVERAGE_TARGET
     replan_after: int = 0  # selection.replan_after of every session's plan (the none arm has no plan)
+    carry_unseen: bool = CARRY_UNSEEN  # the own prior keeps the registered prior where today's views saw nothing
     frame: str = FRAME  # scene.frame: from what the robot knows (its prior), or "current" (today's scan)
     files: tuple = ()  # a dataset plant's scans, day by day (metric point clouds); empty: generated
     plant: str = ""  # the dataset's plant name
@@ -196,18 +206,18 @@ class SeasonCase:
     def labels(self) -> dict:
         return {"plant": self.plant or f"{self.species}-generated-{self.seed}", "species": self.species,
                 "seed": self.seed, "view_space": self.view_space, "coverage_target": self.coverage_target,
-                "replan_after": self.replan_after, "frame": self.frame}
+                "replan_after": self.replan_after, "frame": self.frame, "carry_unseen": self.carry_unseen}
 
 
 def season_cases(quick: bool = False, species=SPECIES, seeds=SEEDS, sessions: int = SESSIONS,
                  view_spaces=VIEW_SPACES, coverage_target: float = COVERAGE_TARGET,
-                 replan_after=REPLAN_AFTER, frame: str = FRAME) -> list[SeasonCase]:
+                 replan_after=REPLAN_AFTER, frame: str = FRAME, carry_unseen: bool = CARRY_UNSEEN) -> list[SeasonCase]:
     """The full protocol's seasons (by default), or the quick ones (one tomato, 3 sessions, each
     view space and re-planning asked)."""
     if quick:
         species, seeds, sessions = QUICK["species"], QUICK["seeds"], QUICK["sessions"]
     return [SeasonCase(s, int(seed), int(sessions), view_space=v, coverage_target=float(coverage_target),
-                       replan_after=int(k), frame=frame)
+                       replan_after=int(k), frame=frame, carry_unseen=carry_unseen)
             for k in replan_after for v in view_spaces for s in species for seed in seeds]
 
 
@@ -238,10 +248,18 @@ def dataset_season_cases(folder, plants=None, quick: bool = False, view_spaces=V
     return cases
 
 
-def _series(case: SeasonCase, case_config, cache_dir=None) -> list:
+@dataclass(frozen=True)
+class _PlantSeries:
+    scans: list
+    carry_unseen: bool
+
+
+def _series(case: SeasonCase, case_config, cache_dir=None) -> _PlantSeries:
     if case.files:
-        return [read_point_cloud(Path(f), units="m") for f in case.files]
-    return [sample.points for sample in generate_growth_series(case.species, case.seed, case.sessions, case.days)]
+        scans = [read_point_cloud(Path(f), units="m") for f in case.files]
+    else:
+        scans = [sample.points for sample in generate_growth_series(case.species, case.seed, case.sessions, case.days)]
+    return _PlantSeries(scans, case.carry_unseen)
 
 
 def _arm_rows(sessions) -> list[dict]:
@@ -250,8 +268,8 @@ def _arm_rows(sessions) -> list[dict]:
 
 
 def _arm(name: str):
-    def run(series, config):
-        return _arm_rows(season_sessions(series, config, (name,)))
+    def run(series: _PlantSeries, config):
+        return _arm_rows(season_sessions(series.scans, config, (name,), carry_unseen=series.carry_unseen))
     return run
 
 
