@@ -59,7 +59,7 @@ def test_a_season_equals_its_sessions_chained_by_hand(series):
     chaining: each day the simulator renders today's truth and executes the warm-up, the planner's
     public stages (transfer, plan) plan from what the robot knows, written out; the session is
     measured by brute force on the truth, and the ``own`` arm's next prior is the model fused from
-    its captures' depth images (scan frame) with the registered prior's points it holds nothing near."""
+    its captures' depth images (scan frame)."""
     assert CONFIG.selection.replan_after == 0  # each session plans once
     table = run_season(series, CONFIG, arms=("truth", "own"), name="tomato 0")
     assert tuple(table.columns) == SEASON_COLUMNS
@@ -90,13 +90,8 @@ def test_a_season_equals_its_sessions_chained_by_hand(series):
             plant = scene.grid.centres[scene.grid.countable]
             assert row["prior_missing"] == pytest.approx(
                 brute_prior_missing(plant, result.clouds["warped"], CONFIG.gt_resolution))
-            if arm == "own":  # what it fused, and the registered prior where that holds nothing near (brute force)
-                warped = result.clouds["warped"]
-                held = {tuple(k) for k in np.floor(planning / CONFIG.gt_resolution).astype(np.int64)}
-                near = [(i, j, k) for i in (-1, 0, 1) for j in (-1, 0, 1) for k in (-1, 0, 1)]
-                unseen = np.array([not any((x + i, y + j, z + k) in held for i, j, k in near)
-                                   for x, y, z in np.floor(warped / CONFIG.gt_resolution).astype(np.int64)])
-                next_own = np.concatenate([fused, (warped[unseen] - matrix[:3, 3]) @ np.linalg.inv(matrix[:3, :3]).T])
+            if arm == "own":
+                next_own = fused
         own = next_own
     # session 2 starts both arms from day 1's full scan
     first = table[table["session"] == 2]
@@ -115,6 +110,21 @@ def test_the_arm_without_prior_is_the_geometric_nbv_until_the_target(series):
     first = next(r for r in curve.itertuples() if r.coverage >= 0.98)  # brute force: the first step there
     assert (row["views"], row["coverage"], row["path_length_m"]) == (first.views, first.coverage, first.path_length)
     assert np.isnan(row["registration_chamfer_mm"]) and np.isnan(row["prior_missing"]) and row["prior_points"] == 0
+
+
+def test_a_carried_prior_keeps_the_registered_prior_where_the_views_did_not_look(series):
+    from tpvp.experiments.season import season_sessions
+    from tpvp.scene.frame import scan_points
+
+    first, second = season_sessions(series, CONFIG, arms=("own",), carry_unseen=True)
+    voxel = CONFIG.gt_resolution
+    held = {tuple(k) for k in np.floor(first.fused / voxel).astype(np.int64)}
+    near = [(i, j, k) for i in (-1, 0, 1) for j in (-1, 0, 1) for k in (-1, 0, 1)]
+    unseen = np.array([not any((x + i, y + j, z + k) in held for i, j, k in near)
+                       for x, y, z in np.floor(first.warped / voxel).astype(np.int64)])
+    assert 0 < unseen.sum() < len(unseen)
+    expected = scan_points(first.scene.plant_from_scan, np.concatenate([first.fused, first.warped[unseen]]))
+    assert np.allclose(second.prior, expected)
 
 
 def test_prior_missing_counts_the_plant_the_prior_holds_nothing_near():

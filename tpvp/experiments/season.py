@@ -4,7 +4,7 @@ Session 1 plans day 2 from day 1's full scan. From session 2 on, each arm plans 
 prior: ``truth``, the previous day's ground-truth scan (the paper's protocol), ``own``, what the
 previous session reconstructed from its own executed views: the model fused from their depth images
 through the configured sensor (``sensor.noise``) by the code that fuses a phone's capture
-(:func:`tpvp.simulate.depth_captures.fused_captures`), the closed loop a monitoring robot runs, or
+(:func:`tpvp.simulate.depth_captures.fused_captures`): the closed loop a monitoring robot runs, or
 ``none``: no prior, the geometric NBV until its true coverage reaches the coverage target (a
 stopping rule on the ground truth: a lower bound for a robot without a prior). Each session plans
 in the frame a robot knows (``scene.frame = previous``: from its prior and the first capture).
@@ -57,7 +57,10 @@ SEEDS = (0, 1, 2)
 VIEW_SPACES = ("hemisphere", "sphere")
 REPLAN_AFTER = (0, 1)  # plan once; re-plan after every planned view (as the re-planning rule was calibrated)
 FRAME = "previous"  # scene.frame of every session: the one a robot knows (its prior and first capture)
-CARRY_UNSEEN = True  # the own prior keeps what the views did not look at again (season_sessions)
+#: Whether the own prior also keeps the registered prior where today's views did not look again
+#: (season_sessions). Off: on calibration seeds 10-11 it lowered the phone's hemisphere sessions
+#: (benchmarks/results/season_world_calibrate.md).
+CARRY_UNSEEN = False
 QUICK = {"species": ("tomato",), "seeds": (0,), "sessions": 3}
 SEASON_COLUMNS = ("session", "arm", "views", "coverage", "path_length_m", "chamfer_fused_mm",
                   "registration_chamfer_mm", "prior_missing", "prior_points")
