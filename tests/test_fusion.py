@@ -121,3 +121,18 @@ def test_capture_fuse_writes_the_corrections_and_names_the_largest(frames, tmp_p
     # a row is fused as reported unless asked (refinement measured worse on the stand-in's walk)
     assert cli.main(["capture", "fuse", str(standin), "--output", str(tmp_path / "row.ply"), "--scale", "row"]) == 0
     assert "poses as reported" in capsys.readouterr().out
+
+
+def test_one_frame_fuses_to_what_it_measured(frames):
+    """A single frame sees each voxel once: its surface is kept (a one-capture session's export), and every fused
+    point lies on a measured depth (brute force: projected, within a fusion voxel of its pixel's depth)."""
+    config = fusion_config("plant")
+    fused = fuse_frames(frames[:1], config, progress=False)
+    assert len(fused.points) > 100
+    frame = frames[0]
+    pose, k = frame.camera_to_world, frame.intrinsics
+    local = (fused.points - pose[:3, 3]) @ pose[:3, :3]
+    u = np.rint(local[:, 0] / local[:, 2] * k.fx + k.cx).astype(int)
+    v = np.rint(local[:, 1] / local[:, 2] * k.fy + k.cy).astype(int)
+    measured = frame.depth[v, u]
+    assert np.all((measured > 0) & (np.abs(measured - local[:, 2]) <= config.support + 1e-6))

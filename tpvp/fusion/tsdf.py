@@ -38,7 +38,7 @@ class FusionConfig:
     truncation: float = 0.01  # m: the signed distance's band, two voxels
     max_depth: float = 1.5  # m: depth farther than this is background
     min_confidence: int = 1  # ARKit's levels: 0 low, 1 medium, 2 high
-    min_weight: float = 1.0  # frames (weighted) that must have seen a surface voxel to keep it
+    min_weight: float = 1.0  # a surface voxel is kept when seen by more frames (weighted) than this; one frame: all
     spacing: float | None = 0.00125  # m: the surface mesh is sampled this far apart, a quarter voxel (None: not)
     support: float = 0.005  # m: a surface point is kept where a frame measured it within this
     refine_poses: bool = False  # align each frame to the model fused so far before integrating it
@@ -169,6 +169,8 @@ def fuse_frames(frames, config: FusionConfig = FusionConfig(), progress: bool = 
         blocks = volume.compute_unique_block_coordinates(depth_image, intrinsic, extrinsic, 1.0, config.max_depth, band)
         volume.integrate(blocks, depth_image, colour_image, intrinsic, intrinsic, extrinsic, 1.0, config.max_depth,
                          band)
+    if len(poses) == 1:  # one frame sees each voxel once at most: keep what it saw
+        config = replace(config, min_weight=min(config.min_weight, 0.0))
     points, colours = surface_samples(volume, config)
     where = f"{source}: " if source else ""
     if len(points) == 0:
