@@ -63,7 +63,8 @@ FRAME = "previous"  # scene.frame of every session: the one a robot knows (its p
 CARRY_UNSEEN = False
 QUICK = {"species": ("tomato",), "seeds": (0,), "sessions": 3}
 SEASON_COLUMNS = ("session", "arm", "views", "coverage", "path_length_m", "chamfer_fused_mm",
-                  "registration_chamfer_mm", "prior_missing", "prior_points")
+                  "registration_chamfer_mm", "prior_missing", "prior_points", "predicted_coverage",
+                  "predicted_coverage_lower")
 
 
 def held_near(points: np.ndarray, prior: np.ndarray, voxel: float) -> np.ndarray:
@@ -156,12 +157,14 @@ def season_sessions(series, config: PlantConfig = PlantConfig(), arms=ARMS, name
         scene = build_scene(prior, today, config, names=(f"{name} day {day} ({arm} prior)", f"{name} day {day + 1}"))
         per_mm = 1e3 / scene.scan_scale  # planning-frame metres -> the scans' millimetres
         warped = None
+        predicted = (float("nan"), float("nan"))  # the plan's own expectation (the per-case miss model)
         if arm == "none":
             views, coverage, path_length, order = _without_prior(scene, config)
             registration = missing = float("nan")
         else:
             result = run_case(scene, config)
             views, coverage, path_length, order = result.n_views, result.coverage, result.path_length, result.order
+            predicted = (result.predicted_coverage, result.predicted_coverage_lower)
             registration = per_mm * result.chamfer_after
             warped = result.clouds["warped"]
             missing = prior_missing(scene, warped, config.gt_resolution)
@@ -173,7 +176,8 @@ def season_sessions(series, config: PlantConfig = PlantConfig(), arms=ARMS, name
         row = {"session": day + 1, "arm": arm, "views": views, "coverage": coverage,
                "path_length_m": path_length, "chamfer_fused_mm": per_mm * chamfer_distance(planning, scene.current),
                "registration_chamfer_mm": registration, "prior_missing": missing,
-               "prior_points": 0 if arm == "none" else len(prior)}
+               "prior_points": 0 if arm == "none" else len(prior), "predicted_coverage": predicted[0],
+               "predicted_coverage_lower": predicted[1]}
         return SeasonSession(scene, prior, list(order), planning, warped, row), fused
 
     return chained_sessions(series, arms, name, session)

@@ -139,6 +139,7 @@ def species_rows(case) -> list:
     best = optimum(scene, config, targets=(SPECIES_TARGET,)).iloc[0]
     row = {**case.labels(), "method": "ours", "views": planned.n_views, "optimum_views": int(best["views"]),
            "coverage": planned.coverage, "path_length_m": planned.path_length,
+           "predicted_coverage": planned.predicted_coverage, "predicted_coverage_lower": planned.predicted_coverage_lower,
            **{f"coverage_{organ}": value for organ, value in planned.organ_coverage.items()}}
     if scene.previous_organs is not None and (scene.previous_organs == CODE["fruit"]).any():
         full = run_case(scene, config, transferred=shared)

@@ -41,6 +41,7 @@ from tpvp.scene.frame import scan_points
 from tpvp.scene.organs import CODE, organ_shares, voxel_organs
 from tpvp.scene.voxels import contains_keys, dilate_keys
 from tpvp.setcover.methods import SelectionProblem, select_views
+from tpvp.setcover.miss_model import VIEW_SPACES as MISS_VIEW_SPACES, load_miss_model, planning_features
 from tpvp.viewspace.priors import PriorContext, candidate_views
 from tpvp.viewspace.space import ViewSpace
 from tpvp.visibility import covered_voxels, oracle_voxels
@@ -181,14 +182,37 @@ def _class_weights(config):
     return getattr(config, "surface_weights", None)
 
 
-def selection_problem(known: Known, config, transferred: Transfer, surface: PlanningSurface) -> SelectionProblem:
+def case_features(config, transferred: Transfer, surface: PlanningSurface) -> dict | None:
+    """What the per-case miss model reads of this plan (:func:`tpvp.setcover.miss_model.planning_features`;
+    every plan it predicts, whichever rule sets its planning target), or None where it predicts
+    nothing: a coverage target of 1, a re-planned plan, a row, a view space it was not calibrated on."""
+    selection = config.selection
+    if (selection.coverage_target >= 1.0 or selection.replan_after or config.setting != "plant"
+            or config.view_space not in MISS_VIEW_SPACES):
+        return None
+    return planning_features(config, transferred, surface)
+
+
+def _per_case(config) -> bool:
+    """Whether the per-case model sets the planning target where it applies (else the constant rule)."""
+    selection = config.selection
+    return selection.miss_model == "per-case" and selection.planning_miss_ratio is None
+
+
+def selection_problem(known: Known, config, transferred: Transfer, surface: PlanningSurface,
+                      features: dict | None = None) -> SelectionProblem:
     """The view selection on ``surface``: the executed views, the planning target of the coverage
-    target and, below a target of 1, the voxels' class weights (``config.surface_weights``)."""
+    target (per case from ``features``, :func:`case_features`, computed when not given and the
+    per-case rule applies) and, below a
+    target of 1, the voxels' class weights (``config.surface_weights``)."""
     selection, classes = config.selection, _class_weights(config)
     weights = None
     if selection.coverage_target < 1.0 and classes is not None and classes.enabled:
         weights = surface_weights(surface.classes, classes, surface.area)
-    target = selection.planning_target(config.view_space)
+    if features is None and _per_case(config):
+        features = case_features(config, transferred, surface)
+    target = (load_miss_model().planning_target_for(features, selection.coverage_target)
+              if features is not None and _per_case(config) else selection.planning_target(config.view_space))
     targets = selection.organ_target_values()
     groups, shares = (organ_groups(surface.organs, targets, target, known.names[0], surface.grid.keys,
                                    selection.organ_margin_voxels) if targets else (None, None))
@@ -248,6 +272,9 @@ class PlanResult:
     replans: tuple = ()  # tpvp.pipeline.replan.Replan rows, in order (selection.replan_after)
     planning_organs: dict = field(default_factory=dict)  # organ -> share of its predicted voxels the plan sees
     organ_coverage: dict = field(default_factory=dict)  # organ -> true coverage (the simulation measures it)
+    # the per-case miss model's predicted true coverage and its lower bound (NaN where it does not apply)
+    predicted_coverage: float = float("nan")
+    predicted_coverage_lower: float = float("nan")
 
     @property
     def order(self) -> list:
@@ -309,8 +336,11 @@ def plan(known: Known, config, transferred: Transfer | None = None, progress=Non
     surface = surface or planning_surface(known, config, transferred, progress)
     timings.update(surface.timings)
     with timed(timings, "selection", say, "view selection"):
-        problem = selection_problem(known, config, transferred, surface)
+        features = case_features(config, transferred, surface)
+        problem = selection_problem(known, config, transferred, surface, features)
         selection = select_views(problem, config.selection)
+    predicted = (load_miss_model().predicted_coverage(features, problem.planning_target) if features is not None
+                 else (float("nan"), float("nan")))
     with timed(timings, "path", say, "path"):
         route = SETTINGS[config.setting].route(known, config, transferred, surface, selection.selected)
     timings["planning"] = sum(timings[k] for k in PLANNING_STAGES if k in timings)
@@ -325,7 +355,8 @@ def plan(known: Known, config, transferred: Transfer | None = None, progress=Non
                 "warped": transferred.alignment.warped, "inflation": surface.inflated.inflation,
                 "planning": surface.inflated.planning},
         planning_target=problem.planning_target, planning_voxels=surface.grid.size, obstacle=route.obstacle,
-        candidates=surface.candidates, planning_organs=planning_organ_shares(problem, selection, surface.organs))
+        candidates=surface.candidates, planning_organs=planning_organ_shares(problem, selection, surface.organs),
+        predicted_coverage=predicted[0], predicted_coverage_lower=predicted[1])
 
 
 def planning_organ_shares(problem, selection, organs) -> dict:
@@ -418,6 +449,8 @@ def _plant_summary(result: PlanResult) -> dict:
         "warnings": " | ".join(result.warnings),
         **{f"coverage_{organ}": value for organ, value in result.organ_coverage.items()},
         **{f"planning_coverage_{organ}": value for organ, value in result.planning_organs.items()},
+        **({"predicted_coverage": result.predicted_coverage, "predicted_coverage_lower": result.predicted_coverage_lower}
+           if np.isfinite(result.predicted_coverage) else {}),
         **({"replans": len(replans), "views_added_by_replanning": sum(r.views_added for r in replans),
             "views_dropped_by_replanning": sum(r.views_dropped for r in replans)} if replans else {}),
         **result.seconds(),
