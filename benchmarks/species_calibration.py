@@ -72,27 +72,6 @@ def calibration_cases(dataset, seeds=GENERATED_SEEDS) -> list:
     return cases
 
 
-def _features(scene, config, shared, surface) -> dict:
-    """What the planner knows of its own prediction after the warm-up (no ground truth)."""
-    from scipy.spatial import cKDTree
-    from scipy import sparse
-
-    from tpvp.inflation.weights import surface_classes
-    from tpvp.visibility import coverage_ratio, covered_voxels, oracle_voxels
-
-    resolution = config.selection.cover_resolution
-    alignment = shared.alignment
-    distance = cKDTree(alignment.warped).query(shared.coarse)[0]
-    classes = surface_classes(surface.grid.keys, resolution, alignment.warped, shared.coarse, 2 * resolution)
-    matrix = sparse.csr_matrix(surface.visibility)
-    coverable = oracle_voxels(matrix)
-    shares = np.bincount(classes[coverable], minlength=4) / len(coverable)
-    return {"fit": alignment.chamfer_after / config.scene.largest_side,
-            "unexplained": float((distance > resolution).mean()),
-            "warm_up_planning": coverage_ratio(covered_voxels(matrix, shared.executed), coverable),
-            **{f"share_{name}": share for name, share in zip(("observed", "near", "far", "inflation"), shares)}}
-
-
 def calibration_rows(case, targets=TARGETS, margins=MARGINS) -> list:
     """One case's rows (a task of :func:`tpvp.parallel.run_cases`): one per planning target, one per
     organ margin on a plant with fruit."""
@@ -101,13 +80,14 @@ def calibration_rows(case, targets=TARGETS, margins=MARGINS) -> list:
     from tpvp.pipeline.jit import compile_kernels
     from tpvp.pipeline.plan import planning_surface
     from tpvp.scene.organs import CODE
+    from tpvp.setcover.miss_model import planning_features
 
     compile_kernels()
     config = case.config(make_config("plant"))
     scene = build_scene(*case.instance.load(), config, organs=case.instance.organs())
     shared = transfer(scene, config)
     surface = planning_surface(known(scene), config, shared)
-    labels = {**case.labels(), **_features(scene, config, shared, surface),
+    labels = {**case.labels(), **planning_features(config, shared, surface),
               "optimum_views": int(optimum(scene, config, targets=(ASKED,))["views"].iloc[0])}
     rows = []
     for target in targets:

@@ -203,16 +203,16 @@ def selection_problem(known: Known, config, transferred: Transfer, surface: Plan
                       features: dict | None = None) -> SelectionProblem:
     """The view selection on ``surface``: the executed views, the planning target of the coverage
     target (per case from ``features``, :func:`case_features`, computed when not given and the
-    per-case rule applies) and, below a
-    target of 1, the voxels' class weights (``config.surface_weights``)."""
+    per-case rule applies) and, below a target of 1, the voxels' class weights
+    (``config.surface_weights``)."""
     selection, classes = config.selection, _class_weights(config)
     weights = None
     if selection.coverage_target < 1.0 and classes is not None and classes.enabled:
         weights = surface_weights(surface.classes, classes, surface.area)
-    if features is None and _per_case(config):
+    if _per_case(config) and features is None:
         features = case_features(config, transferred, surface)
     target = (load_miss_model().planning_target_for(features, selection.coverage_target)
-              if features is not None and _per_case(config) else selection.planning_target(config.view_space))
+              if _per_case(config) and features is not None else selection.planning_target(config.view_space))
     targets = selection.organ_target_values()
     groups, shares = (organ_groups(surface.organs, targets, target, known.names[0], surface.grid.keys,
                                    selection.organ_margin_voxels) if targets else (None, None))

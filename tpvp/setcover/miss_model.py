@@ -37,6 +37,8 @@ MODEL_FILE = Path(__file__).resolve().parents[1] / "data" / "miss_model.json"
 MODEL_VERSION = 1
 #: What the planner knows of its own prediction after the warm-up, the candidates of the model.
 FEATURES = ("fit", "unexplained", "warm_up_planning", "share_far", "share_inflation", "log_voxels")
+#: The surface classes' names in the features (``share_<name>``), in the order of SURFACE_CLASSES.
+CLASS_NAMES = ("observed", "near", "far", "inflation")
 #: The view spaces the model was calibrated on (others keep the constant, most cautious rule).
 VIEW_SPACES = ("hemisphere", "sphere")
 
@@ -45,10 +47,10 @@ def planning_features(config, transferred, surface) -> dict:
     """The model's candidate features of one plan (no ground truth): ``fit``, the registration's
     Chamfer to the coarse scan over the plant's size; ``unexplained``, the share of the coarse scan
     farther than a planning voxel from the aligned previous session; ``warm_up_planning``, the share
-    of the coverable planning voxels the executed views see; ``share_far`` / ``share_inflation``, the
-    coverable voxels transferred far from the coarse scan / only of growth allowance
-    (:func:`tpvp.inflation.weights.surface_classes` at two voxels); ``log_voxels``, log10 of the
-    coverable planning voxels; ``sphere``, 1 on the sphere."""
+    of the coverable planning voxels the executed views see; ``share_<class>``, the coverable voxels
+    of each class of :func:`tpvp.inflation.weights.surface_classes` at two voxels (observed today,
+    transferred near or far from the coarse scan, only growth allowance); ``log_voxels``, log10 of
+    the coverable planning voxels; ``sphere``, 1 on the sphere."""
     resolution = config.selection.cover_resolution
     alignment = transferred.alignment
     warped, coarse = np.asarray(alignment.warped), np.asarray(transferred.coarse)
@@ -60,7 +62,7 @@ def planning_features(config, transferred, surface) -> dict:
     return {"fit": float(alignment.chamfer_after / config.scene.largest_side),
             "unexplained": float((distance > resolution).mean()) if len(distance) else 0.0,
             "warm_up_planning": coverage_ratio(covered_voxels(matrix, transferred.executed), coverable),
-            "share_far": float(shares[2]), "share_inflation": float(shares[3]),
+            **{f"share_{name}": float(share) for name, share in zip(CLASS_NAMES, shares)},
             "log_voxels": float(np.log10(max(len(coverable), 1))),
             "sphere": float(config.view_space == "sphere")}
 
