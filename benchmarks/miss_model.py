@@ -48,7 +48,7 @@ from tpvp.experiments.species import HELIOS_SEEDS
 from tpvp.io import atomic_write_text
 from tpvp.parallel import run_cases
 from tpvp.setcover import miss_model
-from tpvp.setcover.miss_model import FEATURES, MODEL_FILE, fit_miss_model
+from tpvp.setcover.miss_model import FEATURES, MODEL_FILE, fit_miss_model, plan_summary
 from coverage_target_calibration import selection_on_prediction
 from results_file import write_results
 
@@ -149,19 +149,6 @@ def held_out_plans(rows: pd.DataFrame, features: tuple) -> pd.DataFrame:
         if len(plants[~held].unique()) > 1:
             bounds[plant] = fit_miss_model(rows[~held], features, plants[~held], _case_key(rows[~held]), ASKED).lower
     return plans.assign(lower=plans["predicted"] + plans["group"].map(bounds))
-
-
-def plan_summary(plans: pd.DataFrame, by=("view_space",)) -> pd.DataFrame:
-    plans = plans.assign(ratio=plans["views"] / plans["optimum_views"])
-    aggregations = dict(cases=("views", "size"), views_per_optimum=("ratio", "mean"),
-                        coverage_mean=("coverage", "mean"), coverage_min=("coverage", "min"),
-                        below_97=("coverage", lambda c: (c < 0.97).mean()),
-                        below_96=("coverage", lambda c: (c < 0.96).mean()))
-    if "lower" in plans and plans["lower"].notna().any():
-        plans = plans.assign(below_bound=plans["coverage"] < plans["lower"],
-                             error=(plans["predicted"] - plans["coverage"]).abs())
-        aggregations.update(below_bound=("below_bound", "mean"), mean_abs_error=("error", "mean"))
-    return plans.groupby(list(by)).agg(**aggregations).reset_index()
 
 
 def choose_features(rows: pd.DataFrame) -> tuple[tuple, pd.DataFrame]:

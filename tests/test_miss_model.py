@@ -10,7 +10,8 @@ import pytest
 
 from tpvp.errors import ConfigError
 from tpvp.setcover.config import SelectionConfig
-from tpvp.setcover.miss_model import MODEL_FILE, MissModel, _least_squares, fit_miss_model, load_miss_model
+from tpvp.setcover.miss_model import (MODEL_FILE, MissModel, _least_squares, fit_miss_model, load_miss_model,
+                                      plan_summary, targets_missed)
 
 FEATURES = ("unexplained", "fit")
 
@@ -125,6 +126,41 @@ def test_the_shipped_model_is_the_fit_of_its_calibration_rows_and_they_hold_no_e
     assert json.loads(MODEL_FILE.read_text())["calibration"].endswith("miss_model_rows.csv")
 
 
+def test_a_plan_summary_counts_each_group_by_brute_force():
+    rng = np.random.default_rng(3)
+    plans = pd.DataFrame({"view_space": rng.choice(["hemisphere", "sphere"], 40), "views": rng.integers(8, 14, 40),
+                          "optimum_views": rng.integers(7, 11, 40), "coverage": rng.uniform(0.955, 0.995, 40),
+                          "predicted": rng.uniform(0.97, 0.99, 40), "lower": rng.uniform(0.955, 0.975, 40)})
+    summary = plan_summary(plans).set_index("view_space")
+    for space in ("hemisphere", "sphere"):
+        rows = [r for r in plans.to_dict("records") if r["view_space"] == space]
+        n = len(rows)
+        assert summary.loc[space, "cases"] == n
+        assert summary.loc[space, "views_per_optimum"] == pytest.approx(sum(r["views"] / r["optimum_views"] for r in rows) / n)
+        assert summary.loc[space, "coverage_mean"] == pytest.approx(sum(r["coverage"] for r in rows) / n)
+        assert summary.loc[space, "coverage_min"] == min(r["coverage"] for r in rows)
+        assert summary.loc[space, "below_97"] == sum(r["coverage"] < 0.97 for r in rows) / n
+        assert summary.loc[space, "below_96"] == sum(r["coverage"] < 0.96 for r in rows) / n
+        assert summary.loc[space, "below_bound"] == sum(r["coverage"] < r["lower"] for r in rows) / n
+        assert summary.loc[space, "mean_abs_error"] == pytest.approx(
+            sum(abs(r["predicted"] - r["coverage"]) for r in rows) / n)
+    assert "below_bound" not in plan_summary(plans.drop(columns=["lower"]))
+
+
+def test_the_targets_missed_are_named_at_their_thresholds():
+    passing = dict(views_per_optimum=1.10, coverage_mean=0.98, below_97=0.05, below_96=0.0, below_bound=0.07,
+                   mean_abs_error=0.005)
+    failing = dict(views_per_optimum=1.1001, coverage_mean=0.9799, below_97=0.0501, below_96=0.01, below_bound=0.0299,
+                   mean_abs_error=0.0051)
+    summary = pd.DataFrame([passing, failing, {k: v for k, v in failing.items() if k != "below_bound"}])
+    missed = targets_missed(summary, 0.05)
+    assert missed[0] == []
+    assert missed[1] == ["views <= 1.10x the optimum", "mean true coverage >= 98 %", "<= 5 % of cases below 97 %",
+                         "no case below 96 %", "share below the bound within 2 points of the stated share",
+                         "mean |predicted - true| <= 0.5 point"]
+    assert missed[2] == [m for m in missed[1] if "bound" not in m]
+
+
 def test_an_unknown_miss_model_is_refused():
     with pytest.raises(ConfigError, match="selection.miss_model must be one of constant, per-case"):
         SelectionConfig(coverage_target=0.98, miss_model="magic")
@@ -161,3 +197,19 @@ def test_the_planner_asks_the_models_target_and_says_how_sure_it_is():
                 surface=surface)
     assert full.planning_target == 1.0
     assert math.isnan(full.predicted_coverage) and "predicted_coverage" not in full.summary()
+
+
+def test_the_calibration_figure_has_a_panel_per_rule_and_view_space_counting_cases_below_their_bound(monkeypatch, tmp_path):
+    import tpvp.viz.miss_model as figure
+
+    shown = {}
+    monkeypatch.setattr(figure, "_save", lambda fig, path: shown.setdefault("titles", [a.get_title() for a in fig.axes]))
+    rng = np.random.default_rng(1)
+    rows = pd.DataFrame({"view_space": np.tile(["hemisphere", "sphere"], 10), "rule": np.repeat(["constant", "per-case"], 10),
+                         "predicted": rng.uniform(0.975, 0.99, 20), "lower": rng.uniform(0.965, 0.975, 20),
+                         "coverage": rng.uniform(0.96, 0.995, 20)})
+    figure.plot_predicted_coverage(tmp_path / "f.png", rows)
+    expected = [f"{space}, {rule} rule: 5 cases, "
+                f"{int(sum(r['coverage'] < r['lower'] for r in rows.to_dict('records') if (r['rule'], r['view_space']) == (rule, space)))}"
+                f" below their bound" for rule in ("constant", "per-case") for space in ("hemisphere", "sphere")]
+    assert shown["titles"] == expected

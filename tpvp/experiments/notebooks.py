@@ -72,15 +72,15 @@ def show_source(results: ProtocolResults) -> None:
     display(Markdown(f"Rows: {results.source}; {len(results.raw)} raw rows."))
 
 
-def benchmark_results(name: str) -> ProtocolResults:
-    """A benchmark's table (``benchmarks/results/<name>.csv``, written by ``benchmarks/<name>.py``)
-    and, as its source, the date and the run its Markdown file is headed by (not the command line,
-    which may name the machine's folders)."""
+def benchmark_results(name: str, script: str | None = None) -> ProtocolResults:
+    """A benchmark's table (``benchmarks/results/<name>.csv``, written by ``benchmarks/<script>``,
+    by default ``<name>.py``) and, as its source, the script, the date and the run its Markdown file
+    is headed by (not the command line, which may name the machine's folders)."""
     import pandas as pd
 
     table = ROOT / "benchmarks" / "results" / f"{name}.csv"
     if not table.is_file():
-        raise ConfigError(f"{table} is missing: run python benchmarks/{name}.py")
+        raise ConfigError(f"{table} is missing: run python benchmarks/{script or name + '.py'}")
     made = (table.with_suffix(".md").read_text(encoding="utf-8").splitlines() + ["", "", ""])[2]
     run = made.rpartition("` on ")[2].rstrip(".") or "no header"
-    return ProtocolResults(pd.read_csv(table), f"`benchmarks/{name}.py`, {run}")
+    return ProtocolResults(pd.read_csv(table), f"`benchmarks/{script or name + '.py'}`, {run}")

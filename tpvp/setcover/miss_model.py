@@ -182,6 +182,40 @@ def fit_miss_model(rows, features: tuple, groups, cases, asked: float = 0.98, al
     return replace(_least_squares(rows, features, **settings), lower=-offset, alpha=alpha)
 
 
+def plan_summary(plans, by=("view_space",)):
+    """Plans for one asked coverage summarised per ``by``: cases, mean views per exact optimum
+    (``views`` / ``optimum_views`` per case), true coverage (mean, lowest, shares below 97 % and
+    96 %) and, where the plans carry a ``lower`` bound, the share of cases below it and the mean
+    |``predicted`` - true|."""
+    plans = plans.assign(ratio=plans["views"] / plans["optimum_views"])
+    aggregations = dict(cases=("views", "size"), views_per_optimum=("ratio", "mean"),
+                        coverage_mean=("coverage", "mean"), coverage_min=("coverage", "min"),
+                        below_97=("coverage", lambda c: (c < 0.97).mean()),
+                        below_96=("coverage", lambda c: (c < 0.96).mean()))
+    if "lower" in plans and plans["lower"].notna().any():
+        plans = plans.assign(below_bound=plans["coverage"] < plans["lower"],
+                             error=(plans["predicted"] - plans["coverage"]).abs())
+        aggregations.update(below_bound=("below_bound", "mean"), mean_abs_error=("error", "mean"))
+    return plans.groupby(list(by)).agg(**aggregations).reset_index()
+
+
+#: Issue 50's targets for plans asked 98 %: a name, the :func:`plan_summary` column, and the test it passes.
+TARGETS = (("views <= 1.10x the optimum", "views_per_optimum", lambda v, alpha: v <= 1.10),
+           ("mean true coverage >= 98 %", "coverage_mean", lambda v, alpha: v >= 0.98),
+           ("<= 5 % of cases below 97 %", "below_97", lambda v, alpha: v <= 0.05),
+           ("no case below 96 %", "below_96", lambda v, alpha: v == 0),
+           ("share below the bound within 2 points of the stated share", "below_bound", lambda v, alpha: abs(v - alpha) <= 0.02 + 1e-12),
+           ("mean |predicted - true| <= 0.5 point", "mean_abs_error", lambda v, alpha: v <= 0.005))
+
+
+def targets_missed(summary, alpha: float) -> list[list[str]]:
+    """Per row of a :func:`plan_summary`, the names of the :data:`TARGETS` it misses (of those it
+    has a value for)."""
+    return [[name for name, column, holds in TARGETS
+             if column in summary and not math.isnan(row[column]) and not holds(row[column], alpha)]
+            for _, row in summary.iterrows()]
+
+
 def coverage_statement(predicted: float, lower: float, alpha: float) -> str:
     """How sure a plan is, in words: ``predicted 98.4 % (95 % sure of >= 97.6 %)``."""
     return f"predicted {100 * predicted:.1f} % ({100 * (1 - alpha):g} % sure of >= {100 * lower:.1f} %)"
