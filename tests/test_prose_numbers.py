@@ -786,8 +786,55 @@ def _miss_model_sources() -> list:
         ("targets at # % (views at most #x the optimum, a mean of at least # %, at\nmost # % of the cases below # % and "
          "none below # %, a mean error of at most # point, #-# % of the\ncases below the bound)", verdicts),
         ("on the hemisphere it meets the cases below # % and # %", lambda: ["97", "96"]),
+        ("(step #) draws this evaluation", lambda: [_notebook_step("03_table2_plant_complexity", "How sure a plan is")]),
+        *_closing_check_sources(),
     ]
     return out
+
+
+def _notebook_step(notebook: str, title: str) -> str:
+    """The number of the notebook's section ``## N. title``."""
+    import nbformat
+
+    cells = nbformat.read(ROOT / "notebooks" / f"{notebook}.ipynb", as_version=4).cells
+    return next(re.match(r"## (\d+)\. " + re.escape(title), c.source).group(1) for c in cells
+                if c.cell_type == "markdown" and re.match(r"## \d+\. " + re.escape(title), c.source))
+
+
+def _closing_check_sources() -> list:
+    """docs/results.md's closing check: benchmarks/results/closing_check.md."""
+    from tpvp.setcover.config import SelectionConfig
+
+    bench = _benchmark("closing_check")
+    tables = _md_tables("closing_check")
+
+    def plan(space, name) -> dict:
+        return next(r for r in tables["plans for 98 % (coverage and shares in %)"]
+                    if r["view_space"] == space and r["plan"] == name)
+
+    def changed(column) -> list:
+        rows = next(v for k, v in tables.items() if k.startswith("cases below 98 %"))
+        return [next(r for r in rows if r["view_space"] == s)[column] for s in ("hemisphere", "sphere")]
+
+    def target(space) -> str:
+        return f"{100 * SelectionConfig(coverage_target=bench.ASKED).planning_target(space):g}"
+
+    below, hits = changed("one_shot_below_98"), changed("changed_below_98")
+    return [
+        ("(run once, # s on # workers;", lambda: [f"{_md_seconds('closing_check')[0]:.0f}", _md_seconds("closing_check")[1]]),
+        ("cases above, generated seeds #-# and the\nbundled real pair, # cases per view space, the plan for # % by the "
+         "default rule", lambda: [*_md_seeds("closing_check"), plan("hemisphere", "one-shot")["cases"], f"{100 * bench.ASKED:g}"]),
+        *[(f"| {space} | {name} | # | # % (# %) |",
+           lambda space=space, name=name: [Printed(plan(space, name)[c]) for c in
+                                            ("views_per_optimum", "coverage_mean", "coverage_min")])
+          for space in ("hemisphere", "sphere") for name in ("one-shot", "closing check")],
+        ("every hemisphere case below # % (# of #) and # of the # on the sphere, and\nleft # and # case below # %",
+         lambda: ["98", hits[0], below[0], hits[1], below[1], *changed("closing_below_98"), "98"]),
+        ("added views to # and # cases already at # % or more (# and\n# views added in all)",
+         lambda: [*changed("changed_at_98_or_more"), "98", *changed("views_added")]),
+        ("(# % of the surface\nthe captures corrected on the hemisphere, # % on the sphere)",
+         lambda: [target("hemisphere"), target("sphere")]),
+    ]
 
 
 def _replanning_sources() -> list:

@@ -124,6 +124,43 @@ def test_a_session_replans_what_the_simulator_replans(tmp_path, pair):
     assert state["planned_views"] == simulated.planned_views and len(state["replans"]) == len(simulated.replans)
 
 
+def test_a_one_shot_session_checks_its_captures_at_the_end_as_the_simulator_closes(tmp_path, pair, capsys):
+    """Every planned view captured, a one-shot session asks for the closing check (role ``close``);
+    ``tpvp session plan`` then re-plans from the captures and says whether the target holds; with
+    the same captures its views equal ``run_case(closing=True)``'s, and it ends with ``export``."""
+    camera = StandInCamera(*pair, CONFIG)
+    simulated = run_case(camera.scene, camera.config, closing=True)
+    one_shot = run_case(camera.scene, camera.config)
+    assert simulated.replans and simulated.replans[0].remaining_before == 0  # the first check: after every view
+    assert simulated.planned_views[:len(one_shot.planned_views)] == one_shot.planned_views
+    session = Session.start(tmp_path / "session", pair[0], CONFIG, "tomato_0305")
+    roles, printed = [], ""
+    while True:
+        request = session.request()
+        if request.view is None:
+            roles.append(request.role)
+            if request.role == "plan":
+                session.plan()
+            elif request.role == "close":
+                assert main(["session", "plan", str(tmp_path / "session")]) == 0
+                printed += capsys.readouterr().out
+                session = Session.open(tmp_path / "session")
+            else:
+                break
+            continue
+        session.add(camera.cloud(request.view), request.view, f"view {request.view}")
+    assert roles == ["plan", *["close"] * len(simulated.replans), "export"]
+    state = session.state["plan"]
+    assert state["planned_views"] == simulated.planned_views
+    columns = lambda steps: [{k: v for k, v in s.items() if k != "seconds"} for s in steps]  # noqa: E731
+    assert columns(state["replans"]) == columns([step.row() for step in simulated.replans])
+    for step in simulated.replans:
+        seen = f"the captures see {100 * step.captured_coverage:.2f} % of the planning surface"
+        assert seen + (f"): {step.views_added} view(s) added to close the gap" if step.views_added else
+                       "): the plan's target holds, nothing to add") in printed.replace(
+            f" (the plan asks {100 * simulated.planning_target:.2f} %", "")
+
+
 def test_plan_replan_after_prints_each_replan_and_writes_its_rows(tmp_path, capsys):
     out = tmp_path / "plan"
     assert main(["demo", "--output", str(out), "--coverage-target", "0.98", "--replan-after", "3"]) == 0

@@ -65,7 +65,8 @@ class Replan:
     """One re-plan: the views executed when it ran, how the captures disagreed with the prediction
     (captured voxels it did not hold, predicted voxels the captured views did not see), the
     predicted coverage of the planning surface with the remaining views, the views added to and
-    dropped from the remaining plan, and the seconds it took."""
+    dropped from the remaining plan, the seconds it took, and the share of the planning surface
+    the executed views see alone (NaN in rows written before it was recorded)."""
 
     views_so_far: int
     unexpected_voxels: int
@@ -76,6 +77,7 @@ class Replan:
     views_added: int
     views_dropped: int
     seconds: float
+    captured_coverage: float = float("nan")
 
     @property
     def changed(self) -> bool:
@@ -91,7 +93,8 @@ class Replan:
         return {"views_so_far": self.views_so_far, "unexpected_voxels": self.unexpected_voxels,
                 "contradicted_voxels": self.contradicted_voxels, "predicted_coverage": self.predicted_coverage,
                 "remaining_before": self.remaining_before, "remaining_after": self.remaining_after,
-                "views_added": self.views_added, "views_dropped": self.views_dropped, "seconds": self.seconds}
+                "views_added": self.views_added, "views_dropped": self.views_dropped, "seconds": self.seconds,
+                "captured_coverage": self.captured_coverage}
 
 
 def prediction_of(surface, views_so_far: int) -> Prediction:
@@ -192,7 +195,8 @@ def replan(known: Known, config, nbv, warm_up: int, planned, prediction: Predict
     order = [int(v) for v in result.planned_views]
     _, share = _reaches(problem, order)
     row = Replan(len(executed), unexpected, contradicted, share, len(remaining), len(order),
-                 len(set(order) - set(remaining)), len(set(remaining) - set(order)), time.perf_counter() - started)
+                 len(set(order) - set(remaining)), len(set(remaining) - set(order)), time.perf_counter() - started,
+                 _reaches(problem, [])[1])
     result = replace(result, executed_views=executed[:warm_up], planned_views=executed[warm_up:] + order,
                      n_views=len(executed) + len(order))
     return result, prediction_of(surface, len(executed)), row

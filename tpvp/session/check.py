@@ -260,9 +260,10 @@ def _plan_record_problem(plan, kind: str) -> str | None:
         return "the plan has 'views_so_far' but no 'warm_up'"
 
     fields = {field.name for field in dataclasses.fields(Replan)}
+    required = {field.name for field in dataclasses.fields(Replan) if field.default is dataclasses.MISSING}
     replans = plan.get("replans", [])
     if not isinstance(replans, list) or not all(
-            isinstance(row, dict) and set(row) == fields
+            isinstance(row, dict) and required <= set(row) <= fields
             and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in row.values()) for row in replans):
         return "the plan's 'replans' are not re-plan rows"
     return None

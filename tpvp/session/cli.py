@@ -203,7 +203,13 @@ def _session_plan(args) -> int:
         captured = {c["view"] for c in session.captures}
         left = [v for v in session.state["plan"]["planned_views"] if v not in captured]
         if result.replans:
-            print(f"  re-plan {len(result.replans)}: {result.replans[-1].line()}")
+            step = result.replans[-1]
+            print(f"  re-plan {len(result.replans)}: {step.line()}")
+            if step.remaining_before == 0:  # the check of a plan whose views were all captured
+                seen = (f"the captures see {100 * step.captured_coverage:.2f} % of the planning surface (the plan "
+                        f"asks {100 * result.planning_target:.2f} %)")
+                print(f"  {seen}: {step.views_added} view(s) added to close the gap" if step.views_added else
+                      f"  {seen}: the plan's target holds, nothing to add")
         print(f"  views (captures included)         {result.n_views} ({result.n_views - len(left)} captured, "
               f"{len(left)} to capture: {_views_listed(left)})")
         if math.isfinite(result.predicted_coverage):

@@ -67,7 +67,10 @@ class Request:
         if self.view is None:
             return {"export": "every planned view is captured: `tpvp session export` writes today's model",
                     "replan": "planned views were captured (selection.replan_after): run `tpvp session plan` to "
-                              "re-plan the rest from them"}.get(self.role, "the warm-up is done: run `tpvp session plan`")
+                              "re-plan the rest from them",
+                    "close": "every planned view is captured: `tpvp session plan` checks the captures against the "
+                             "coverage target and adds the views that close a gap (or `tpvp session export` writes "
+                             "today's model as it is)"}.get(self.role, "the warm-up is done: run `tpvp session plan`")
         fmt = lambda v: "(" + ", ".join(f"{x:.4f}" for x in v) + ")"  # noqa: E731
         return (f"next: capture view {self.view} ({self.role}) at {fmt(self.position)} looking at "
                 f"{fmt(self.look_at)}, quaternion xyzw {fmt(self.quaternion)} (world frame, m)")
@@ -249,9 +252,14 @@ class Session:
     def captures(self) -> list[dict]:
         return self.state["captures"]
 
+    #: Whether a plan of this kind re-plans from its captures (``selection.replan_after``, and the
+    #: closing check of a one-shot plan: role ``close``).
+    replans = False
+
     def request(self) -> Request:
         """The next pose to capture: the warm-up's, then (once planned) the planned views in the
-        path's order; none when there is nothing to capture."""
+        path's order; none when there is nothing to capture (role ``plan``, ``replan``, ``close``:
+        a one-shot plan's views are all captured and not yet checked, or ``export``)."""
         done = len(self.captures)
         if done < self.warm_up_views():
             return self.warm_up_request(done)
@@ -265,7 +273,7 @@ class Session:
         if every and since and (since >= every or not left):
             return Request(None, role="replan")
         if not left:
-            return Request(None, role="export")
+            return Request(None, role="close" if self.replans and since else "export")
         number = len(plan["planned_views"]) - len(left) + 1
         return self.pose_request(left[0], f"planned view {number} of {len(plan['planned_views'])}")
 

@@ -11,7 +11,9 @@
   captured, and writes the plan as ``tpvp plan`` does (``plan/``, with ``prediction.npz``: what
   the plan predicts its views see); the planned views are asked next. Run again after planned
   views were captured (asked for every ``selection.replan_after`` views), it re-plans the rest from
-  the captures (:func:`tpvp.pipeline.replan.replan`), as the simulator does;
+  the captures (:func:`tpvp.pipeline.replan.replan`), as the simulator does; once a one-shot plan's
+  views are all captured, run again it checks them against the coverage target and adds the views
+  that close a gap (the simulator's ``run_case(closing=True)``);
 * ``export`` writes today's fused model (every capture's voxel centres, world frame).
 
 The world frame is the previous model's own (metres after ``--units``). With the same captures,
@@ -46,6 +48,7 @@ class PlantSession(Session):
     """A single plant: candidate views on a sphere or hemisphere around the previous model."""
 
     kind = "plant"
+    replans = True
 
     @classmethod
     def session_config(cls, config: PlantConfig) -> PlantConfig:

@@ -61,15 +61,19 @@ def transfer(scene: Scene, config: PlantConfig = PlantConfig(), progress=None) -
 
 
 def run_case(scene: Scene, config: PlantConfig = PlantConfig(), progress=None,
-             transferred: Transfer | None = None, surface: PlanningSurface | None = None) -> PlanResult:
+             transferred: Transfer | None = None, surface: PlanningSurface | None = None,
+             closing: bool = False) -> PlanResult:
     """Warm-up, transfer, plan and execute one case; ``progress(stage)`` is called per stage.
     ``transferred``: the :func:`transfer` of this scene and configuration when already computed
     (methods that differ only after registration share it); ``surface``: likewise its
-    :func:`tpvp.pipeline.plan.planning_surface` (plans that differ only in the selection share it)."""
+    :func:`tpvp.pipeline.plan.planning_surface` (plans that differ only in the selection share it).
+    ``closing``: a one-shot plan (``selection.replan_after`` 0) is re-planned once all its views
+    are captured, and again after the views that adds, as a session does when asked to
+    (``tpvp session plan`` at its end)."""
     transferred = transferred or transfer(scene, config, progress)
     surface = surface or planning_surface(known(scene), config, transferred, progress)
     result = plan(known(scene), config, transferred, progress, surface)
-    if config.selection.replan_after:
+    if config.selection.replan_after or closing:
         result = execute_replanning(scene, config, transferred, result, surface, progress)
     executed, planned = result.executed_views, result.planned_views
     covered = covered_voxels(scene.truth_visibility, executed + planned)
@@ -90,10 +94,11 @@ def organ_coverage(scene: Scene, covered) -> dict:
 
 def execute_replanning(scene: Scene, config: PlantConfig, transferred: Transfer, result: PlanResult,
                        surface: PlanningSurface, progress=None) -> PlanResult:
-    """Execute ``result``'s plan on the ground truth ``selection.replan_after`` views at a time,
-    re-planning the rest from the captures after each batch (:func:`tpvp.pipeline.replan.replan`),
-    until no view is left. The result holds every re-plan's row; its timings add the re-planning."""
-    step = config.selection.replan_after
+    """Execute ``result``'s plan on the ground truth ``selection.replan_after`` views at a time (all
+    that are left when it is 0), re-planning the rest from the captures after each batch
+    (:func:`tpvp.pipeline.replan.replan`), until no view is left. The result holds every re-plan's
+    row; its timings add the re-planning."""
+    step = config.selection.replan_after or None
     nbv = start_nbv(scene, config)  # a copy of the warm-up's state: ``transferred`` may be shared
     for view, seen in zip(transferred.nbv.executed, transferred.nbv.observations):
         nbv.integrate(view, seen)
