@@ -154,6 +154,14 @@ def test_a_one_shot_session_checks_its_captures_at_the_end_as_the_simulator_clos
     assert state["planned_views"] == simulated.planned_views
     columns = lambda steps: [{k: v for k, v in s.items() if k != "seconds"} for s in steps]  # noqa: E731
     assert columns(state["replans"]) == columns([step.row() for step in simulated.replans])
+    # a folder's re-plan rows from before captured_coverage was recorded read as sound; other keys do not
+    from tpvp.session.check import _plan_record_problem
+
+    assert _plan_record_problem(state, "plant") is None
+    old = {**state, "replans": [{k: v for k, v in row.items() if k != "captured_coverage"} for row in state["replans"]]}
+    assert _plan_record_problem(old, "plant") is None
+    assert _plan_record_problem({**state, "replans": [{**state["replans"][0], "surprise": 1}]}, "plant") == \
+        "the plan's 'replans' are not re-plan rows"
     for step in simulated.replans:
         seen = f"the captures see {100 * step.captured_coverage:.2f} % of the planning surface"
         assert seen + (f"): {step.views_added} view(s) added to close the gap" if step.views_added else
