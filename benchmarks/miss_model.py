@@ -22,12 +22,14 @@ the same species and seed are one plant), in the judging and in the conformal bo
 pair (the 42-case protocol per view space), the plan for 98 % with the per-case model and with the
 constant rule, beside the exact optimum. Printed per view space and rule: views per optimum, true
 coverage (mean, lowest, cases below 97 % and 96 %), the cases below the predicted lower bound and the
-mean |predicted - true| (the model predicts the plans of either rule).
+mean |predicted - true| (the model predicts the plans of either rule). ``--noise PROFILE``: the same
+with the robot's captures under a sensor profile (tpvp.sensor.noise), the model as calibrated on
+the ideal sensor.
 
 Usage:
     python benchmarks/miss_model.py --mode rows [--seeds 10 11 12] [--dataset DIR]
     python benchmarks/miss_model.py --mode fit
-    python benchmarks/miss_model.py --mode evaluate
+    python benchmarks/miss_model.py --mode evaluate [--noise arm-rgbd]
 """
 
 from __future__ import annotations
@@ -169,15 +171,16 @@ def choose_features(rows: pd.DataFrame) -> tuple[tuple, pd.DataFrame]:
     return best, table
 
 
-def evaluation_rows(case) -> list:
+def evaluation_rows(case, noise: str = "ideal") -> list:
     """One evaluation case: the plan for 98 % with the per-case model and with the constant rule,
-    and the exact optimum for 98 %."""
+    and the exact optimum for 98 % (of today's true plant: the same under every sensor), the
+    robot's captures under the sensor profile ``noise``."""
     from tpvp.pipeline.jit import compile_kernels
     from tpvp.simulate.optimum import optimum
     from tpvp.simulate.single_plant import build_scene, run_case, transfer
 
     compile_kernels()
-    config = case.config(make_config("plant"))
+    config = case.config(make_config("plant", {"sensor.noise": noise}))
     scene = build_scene(*case.instance.load(), config)
     shared = transfer(scene, config)
     best = int(optimum(scene, config, targets=(ASKED,))["views"].iloc[0])
@@ -185,7 +188,7 @@ def evaluation_rows(case) -> list:
     for rule in ("per-case", "constant"):
         planned = replace(config, selection=replace(config.selection, coverage_target=ASKED, miss_model=rule))
         result = run_case(scene, planned, transferred=shared)
-        rows.append({**case.labels(), "rule": rule, "views": result.n_views, "optimum_views": best,
+        rows.append({**case.labels(), "noise": noise, "rule": rule, "views": result.n_views, "optimum_views": best,
                      "coverage": result.coverage, "planning_target": result.planning_target,
                      "predicted": result.predicted_coverage, "lower": result.predicted_coverage_lower})
     return [pd.DataFrame(rows)]
@@ -209,6 +212,9 @@ def main() -> None:
     parser.add_argument("--helios-seed", type=int, default=HELIOS_SEEDS["calibration"],
                         help="rows: the seed --dataset was grown with (default: %(default)s)")
     parser.add_argument("--rows", type=Path, nargs="+", default=[ROWS], help="fit: calibration rows (CSV)")
+    parser.add_argument("--noise", default="ideal",
+                        help="evaluate: the sensor profile of the robot's captures (default: %(default)s); results "
+                             "miss_model_evaluate_<profile>.* beside the ideal sensor's")
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--results", type=Path, default=RESULTS)
     args = parser.parse_args()
@@ -239,18 +245,19 @@ def main() -> None:
         return
     seeds = plants.GENERATED_SEEDS if args.seeds is None else tuple(args.seeds)
     cases = plants.case_list(plants.generated_instances(seeds=seeds) + [plants.bundled_instance()])
-    rows = pd.concat(run_cases(evaluation_rows, cases, (), 1, args.workers, desc="evaluation cases"), ignore_index=True)
-    atomic_write_text(args.results / "miss_model_evaluate.csv", rows.to_csv(index=False))
+    rows = pd.concat(run_cases(evaluation_rows, cases, (args.noise,), 1, args.workers, desc="evaluation cases"),
+                     ignore_index=True)
+    name = "miss_model_evaluate" + ("" if args.noise == "ideal" else f"_{args.noise}")
+    atomic_write_text(args.results / f"{name}.csv", rows.to_csv(index=False))
     summary = plan_summary(rows, by=("rule", "view_space"))
     from tpvp.viz.miss_model import plot_predicted_coverage
 
-    plot_predicted_coverage(args.results / "miss_model_evaluate.png", rows, ASKED,
-                            title="plans for 98 %: predicted and true coverage (evaluation: seeds 0-2, bundled pair)")
-    write_results(args.results / "miss_model_evaluate.md", [("plans for 98 % (coverage and shares in %)",
-                                                             _percent(summary))],
-                  f"{len(cases)} cases (seeds {list(seeds)} and the bundled pair), "
+    plot_predicted_coverage(args.results / f"{name}.png", rows, ASKED,
+                            title=f"plans for 98 %: predicted and true coverage (evaluation: seeds 0-2, bundled pair; "
+                                  f"{args.noise} sensor)")
+    write_results(args.results / f"{name}.md", [("plans for 98 % (coverage and shares in %)", _percent(summary))],
+                  f"{len(cases)} cases (seeds {list(seeds)} and the bundled pair), sensor {args.noise}, "
                   f"{time.perf_counter() - started:.0f} s on {args.workers} workers")
-
 
 if __name__ == "__main__":
     main()
