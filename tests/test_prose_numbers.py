@@ -835,7 +835,21 @@ def _noisy_evaluation_sources() -> list:
         ("the cases below # % and\n# % on both view spaces", lambda: verdicts()[:2]),
         ("the\nbound's share on both (more than # points from # %)", lambda: verdicts()[2:]),
         ("(step #) draws this evaluation", lambda: [_notebook_step("03_table2_plant_complexity", "How sure a plan is")]),
+        ("helios-plants)), # % of the # hemisphere cases and\n# % of the # "
+         "sphere cases fall below their bound, and the mean error is # / # point", _species_prediction),
     ]
+
+
+def _species_prediction() -> list:
+    """The Helios evaluation species' plans against their prediction (species_tables' ``prediction``), and
+    whether both calibration targets are missed."""
+    table = _species_tables()["prediction"].set_index("view_space")
+    missed = all(abs(table.loc[s, "below_bound"] - 0.05) > 0.02 and table.loc[s, "mean_abs_error"] > 0.005
+                 for s in ("hemisphere", "sphere"))
+    return ([x for s in ("hemisphere", "sphere") for x in (f"{100 * table.loc[s, 'below_bound']:.1f}",
+                                                          str(table.loc[s, "cases"]))]
+            + [f"{100 * table.loc[s, 'mean_abs_error']:.2f}" for s in ("hemisphere", "sphere")]
+            + _claim(missed, "both calibration targets missed on the Helios evaluation species"))
 
 
 def _notebook_step(notebook: str, title: str) -> str:

@@ -185,7 +185,8 @@ def _with_seeds(table: pd.DataFrame, cases: pd.DataFrame, keys: list) -> pd.Data
 def species_tables(raw: pd.DataFrame, split: str = "evaluation", helios_seed: int | None = None) -> dict:
     """The species protocol's tables: the evaluation species (a dataset's but
     :data:`CALIBRATION_SPECIES`) per view space, the dataset's calibration species alike, every
-    species per view space with its organs, and the organ targets against the full cover. Each
+    species per view space with its organs, the organ targets against the full cover, and (rows that
+    carry the plan's predicted coverage) the evaluation species' plans against their prediction. Each
     table's first columns say which run its rows are (``split``; the species protocol is the
     evaluation) and the seeds its plants come from (``seed``, :func:`with_split`)."""
     raw = with_split(raw, split, helios_seed)
@@ -211,6 +212,12 @@ def species_tables(raw: pd.DataFrame, split: str = "evaluation", helios_seed: in
         path_m=("path_length_m", "mean"), **{c.removeprefix("coverage_"): (c, "mean") for c in organs}).reset_index()
     per_species = _with_seeds(per_species, raw, ["species", "view_space"])
     tables = {"overall": overall, "calibration_species": calibration_species, "per_species": per_species}
+    if "predicted_coverage" in raw:  # how sure the evaluation species' plans were (tpvp.setcover.miss_model)
+        from tpvp.setcover.miss_model import plan_summary
+
+        plans = helios[~calibration].rename(columns={"predicted_coverage": "predicted",
+                                                     "predicted_coverage_lower": "lower"})
+        tables["prediction"] = _with_seeds(plan_summary(plans), plans, ["view_space"])
     if "organ_views" in raw:
         fruiting = raw[raw["organ_views"].notna()]
         tables["organ_targets"] = fruiting.groupby(["species", "view_space"]).agg(
