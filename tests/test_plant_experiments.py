@@ -77,6 +77,9 @@ def test_results_folder_holds_tables_figures_and_the_comparison(raw, tiny_cases,
         assert int(row.order.split()[0]) == case.initial_view  # the same initial view
     # nothing with that many views sees more than the optimum
     assert compared["coverage"].max() == pytest.approx(compared.set_index("method").loc["optimum", "coverage"])
+    # the oracle voxels each plan missed: coverage = 1 - missed / |oracle| for every plan alike
+    oracle = len(plants.case_scene(case, case.config(CONFIG)).oracle)
+    assert compared["coverage"].tolist() == pytest.approx((1 - compared["missed_voxels"] / oracle).tolist())
 
 
 def test_the_comparison_shows_ma_scvp_on_its_32_views():

@@ -124,9 +124,10 @@ def write_comparison_files(folder, scene: Scene, config: PlantConfig, views: int
     folder.mkdir(parents=True, exist_ok=True)
     plans = compare_methods(scene, config, views)
     space = scene.view_space
+    oracle = np.asarray(scene.oracle)
     table = pd.DataFrame([{"method": p.method, "views": len(p.order), "coverage": p.coverage,
-                           "path_length_m": p.path_length, "order": " ".join(map(str, p.order)), "note": p.note}
-                          for p in plans])
+                           "missed_voxels": int(np.count_nonzero(~p.covered[oracle])), "path_length_m": p.path_length,
+                           "order": " ".join(map(str, p.order)), "note": p.note} for p in plans])
     atomic_write_text(folder / "comparison.csv", table.to_csv(index=False))
     figure = plot_method_comparison(folder / "comparison.png", scene, plans, title)
     colours = {"gmc": (40, 90, 220), "ma-scvp": (230, 150, 20), "ours": (220, 40, 40), "optimum": (30, 30, 30)}
