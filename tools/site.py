@@ -226,6 +226,12 @@ def _notebook_page(executed: Path, entry: dict, links: SiteLinks, target: Path) 
         elif "outputs" in cell:
             cell.outputs = [output for output in cell.outputs
                             if "application/vnd.jupyter.widget-view+json" not in output.get("data", {})]
+            for output in cell.outputs:  # Markdown a cell displays (e.g. the paper gaps' links into docs/)
+                data = output.get("data", {})
+                if "text/markdown" in data:
+                    text = data["text/markdown"]
+                    data["text/markdown"] = links.rewrite("".join(text) if isinstance(text, list) else text,
+                                                          "notebooks", html=True)
     _title_first(notebook, NOTEBOOKS / executed.name)
     first_markdown = next((c for c in notebook.cells if c.cell_type == "markdown"), None)
     title = (_first_heading(first_markdown.source) if first_markdown is not None else None) or executed.stem

@@ -145,11 +145,12 @@ def paper_comparison(ours: pd.DataFrame, paper: pd.DataFrame, on: list, values: 
 
 
 def show_paper_table(ours: pd.DataFrame, paper: pd.DataFrame, csv_path, title: str, *, on: list, values: dict,
-                     keys: list | None = None, digits: int = 2) -> None:
+                     keys: list | None = None, digits: int = 2, gaps: str | None = None) -> None:
     """Show a paper table compactly (:func:`paper_comparison`: ours / paper / Δ per value, the keys'
     display names from :data:`KEY_LABELS`) and write the wide one (every column, ours and the
     paper's side by side: :func:`beside_paper`; ``paper`` None: ``ours`` holds the paper's columns)
-    to ``csv_path``, linked under the table."""
+    to ``csv_path``, linked under the table. ``gaps``: the paper's table (``"I"``, ...): the values far
+    from the paper's are listed under it with why (:mod:`tpvp.experiments.paper_gaps`)."""
     from IPython.display import Markdown, display
 
     wide = ours if paper is None else beside_paper(ours, paper, on=on, values=tuple(n for n, _ in values.values()))
@@ -157,6 +158,12 @@ def show_paper_table(ours: pd.DataFrame, paper: pd.DataFrame, csv_path, title: s
     display(Markdown(f"**{title}**"))
     _display_parts(paper_comparison(wide, None, on, values, keys, digits, KEY_LABELS), digits)
     display(csv_link(wide, Path(csv_path).name))
+    if gaps is not None:
+        from tpvp.experiments.paper_gaps import gap_lines
+
+        lines = gap_lines(wide, gaps, keys or on, values)
+        if lines:
+            display(Markdown("\n".join(lines)))
 
 
 #: The plants' tables (I-IV): our column -> (the paper's column, header with its unit).
