@@ -145,6 +145,9 @@ def test_a_plan_summary_counts_each_group_by_brute_force():
         assert summary.loc[space, "mean_abs_error"] == pytest.approx(
             sum(abs(r["predicted"] - r["coverage"]) for r in rows) / n)
     assert "below_bound" not in plan_summary(plans.drop(columns=["lower"]))
+    without = plan_summary(plans.drop(columns=["optimum_views"]))
+    assert "views_per_optimum" not in without and without.drop(columns="view_space").equals(
+        summary.reset_index().drop(columns=["view_space", "views_per_optimum"]))
 
 
 def test_the_targets_missed_are_named_at_their_thresholds():

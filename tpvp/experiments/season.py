@@ -289,7 +289,8 @@ for _name, _help in (("truth", "each session from the previous day's ground-trut
 def tables(raw: pd.DataFrame) -> dict:
     """Per session and arm (means over the plants), and per season: total views, the lowest
     coverage of any session, and how far the fused model's Chamfer distance drifted (last session
-    minus the first)."""
+    minus the first); where the plans predicted their coverage (one-shot plans below 1), how their
+    true coverage fell against it (:func:`tpvp.setcover.miss_model.plan_summary`)."""
     rows = raw.rename(columns={"method": "arm"})
     per_session = mean_std(rows, ["view_space", "replan_after", "session", "arm"],
                            columns=("views", "coverage", "path_length_m", "chamfer_fused_mm",
@@ -302,7 +303,14 @@ def tables(raw: pd.DataFrame) -> dict:
     season["chamfer_drift_mm"] = season["chamfer_last_mm"] - season["chamfer_first_mm"]
     season = season.round({"lowest_coverage": 2, "chamfer_first_mm": 3, "chamfer_last_mm": 3, "chamfer_drift_mm": 3,
                            "path_length_m": 2})
-    return {"season_per_session": per_session, "season_totals": season}
+    written = {"season_per_session": per_session, "season_totals": season}
+    if "predicted_coverage" in rows and rows["predicted_coverage"].notna().any():  # how sure the plans were
+        from tpvp.setcover.miss_model import plan_summary
+
+        plans = rows[rows["predicted_coverage"].notna()].rename(
+            columns={"predicted_coverage": "predicted", "predicted_coverage_lower": "lower"})
+        written["season_prediction"] = plan_summary(plans, by=("view_space", "replan_after", "arm"))
+    return written
 
 
 def _figures(folder, raw: pd.DataFrame, written: dict, config) -> None:

@@ -184,12 +184,14 @@ def fit_miss_model(rows, features: tuple, groups, cases, asked: float = 0.98, al
 
 def plan_summary(plans, by=("view_space",)):
     """Plans for one asked coverage summarised per ``by``: cases, mean views per exact optimum
-    (``views`` / ``optimum_views`` per case), true coverage (mean, lowest, shares below 97 % and
+    (``views`` / ``optimum_views`` per case, where the plans have an optimum), true coverage (mean, lowest, shares below 97 % and
     96 %) and, where the plans carry a ``lower`` bound, the share of cases below it and the mean
     |``predicted`` - true|."""
-    plans = plans.assign(ratio=plans["views"] / plans["optimum_views"])
-    aggregations = dict(cases=("views", "size"), views_per_optimum=("ratio", "mean"),
-                        coverage_mean=("coverage", "mean"), coverage_min=("coverage", "min"),
+    aggregations = dict(cases=("views", "size"))
+    if "optimum_views" in plans:
+        plans = plans.assign(ratio=plans["views"] / plans["optimum_views"])
+        aggregations.update(views_per_optimum=("ratio", "mean"))
+    aggregations.update(coverage_mean=("coverage", "mean"), coverage_min=("coverage", "min"),
                         below_97=("coverage", lambda c: (c < 0.97).mean()),
                         below_96=("coverage", lambda c: (c < 0.96).mean()))
     if "lower" in plans and plans["lower"].notna().any():
