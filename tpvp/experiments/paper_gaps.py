@@ -14,7 +14,7 @@ RELATIVE_GAP = 0.10
 SHOWN = 4  # far values listed per explanation
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True)
 class Explanation:
     """Why rows of paper ``tables`` differ: those whose key columns hold one of ``match``'s values
     (every key named; an empty ``match`` takes every row), for the ``values`` named (empty: any)."""
