@@ -235,7 +235,47 @@ def _room_number(room: str) -> str:
 
 
 _TRUTH_REGISTRATION = ("registration_chamfer_mm", "truth")
+def _miss_alpha() -> float:
+    from tpvp.setcover.miss_model import load_miss_model
+
+    return load_miss_model().alpha
+
+
+def _season_prediction() -> dict:
+    """season.tables' prediction summary of the shipped season rows, by (view space, arm)."""
+    table = season.tables(shipped.shipped_rows("season"))["season_prediction"]
+    return {(r.view_space, r.arm): r for r in table.itertuples()}
+
+
+def _season_prediction_numbers() -> list:
+    rows = _season_prediction()
+    pct = lambda v: f"{100 * v:.1f}"  # noqa: E731
+    holds = (all(abs(rows[("sphere", a)].below_bound - 0.05) <= 0.02 for a in ("own", "truth"))
+             and all(abs(rows[("hemisphere", a)].below_bound - 0.05) > 0.02 for a in ("own", "truth"))
+             and [k for k, r in rows.items() if r.mean_abs_error <= 0.005] == [("sphere", "truth")])
+    return ([str(rows[("hemisphere", "own")].cases), pct(rows[("hemisphere", "own")].below_bound),
+             pct(rows[("hemisphere", "truth")].below_bound), pct(rows[("sphere", "own")].below_bound),
+             pct(rows[("sphere", "truth")].below_bound)]
+            + [f"{100 * rows[(s, a)].mean_abs_error:.2f}" for s in ("hemisphere", "sphere") for a in ("own", "truth")]
+            + _claim(holds, "the bound holds on the sphere only, the error only for the sphere's truth arm"))
+
+
+def _season_session_targets() -> list:
+    rows = _season_prediction().values()
+    shares = [100 * r.below_97 for r in rows]
+    lowest = min(rows, key=lambda r: r.coverage_min)
+    return ["0.98", f"{min(shares):.1f}", f"{max(shares):.1f}", "97", f"{100 * lowest.coverage_min:.2f}"] + _claim(
+        (lowest.arm, lowest.view_space) == ("own", "hemisphere"), "the lowest session is own's on the hemisphere")
+
+
 _SEASON = [
+    ("predicted\ntrue coverage and its # % lower bound", lambda: [f"{100 * (1 - _miss_alpha()):g}"]),
+    ("Over the # sessions per view space and arm, the true coverage falls below the bound in # %\n(`own`) and # % "
+     "(`truth`) of the hemisphere's sessions and in # % / # % of the sphere's, with\na mean error of # / # and # / # "
+     "point", _season_prediction_numbers),
+    ("bound holds on the sphere (within # points\nof # %), not on the hemisphere, and the mean error meets # point",
+     lambda: ["2", "5", "0.5"]),
+    ("targets at #: #-# % of them are below\n# %, and the lowest is # %", _season_session_targets),
     ("seeds #-#, six scans", lambda: [str(min(season.SEEDS)), str(max(season.SEEDS))]),
     ("# seasons x # arms, # min on # workers in its last refresh",
      lambda: [str(_n_seasons(0) + _n_seasons(1)), str(len(season.ARMS)),
