@@ -1,10 +1,10 @@
-"""Values far from the paper's, listed under each paper table with why (tpvp.experiments.paper_gaps):
+"""Values far from the paper's, listed under each paper table with why (tpvp.viz.paper_gaps):
 exactly those beyond the relative gap, each under the first explanation that covers it."""
 
 import numpy as np
 import pandas as pd
 
-from tpvp.experiments.paper_gaps import EXPLANATIONS, RELATIVE_GAP, gap_lines, large_gaps
+from tpvp.viz.paper_gaps import EXPLANATIONS, RELATIVE_GAP, gap_lines, large_gaps
 
 VALUES = {"views": ("views", "views"), "coverage": ("coverage", "coverage (%)")}
 

@@ -39,6 +39,7 @@ from tpvp.nbv.blockwise import blockwise_nbv
 from tpvp.registry import Registry
 from tpvp.scene import voxels
 from tpvp.scene.boxes import room_config
+from tpvp.setcover.miss_model import plan_summary
 from tpvp.synthetic.greenhouse import generate_row_sessions
 from tpvp.synthetic.plants import generate_growth_series
 from tpvp.synthetic.scan import reference_points
@@ -305,8 +306,6 @@ def tables(raw: pd.DataFrame) -> dict:
                            "path_length_m": 2})
     written = {"season_per_session": per_session, "season_totals": season}
     if "predicted_coverage" in rows and rows["predicted_coverage"].notna().any():  # how sure the plans were
-        from tpvp.setcover.miss_model import plan_summary
-
         plans = rows[rows["predicted_coverage"].notna()].rename(
             columns={"predicted_coverage": "predicted", "predicted_coverage_lower": "lower"})
         written["season_prediction"] = plan_summary(plans, by=("view_space", "replan_after", "arm"))

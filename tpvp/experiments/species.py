@@ -22,6 +22,7 @@ from tpvp.experiments import plants
 from tpvp.simulate.optimum import optimum
 from tpvp.simulate.single_plant import build_scene, run_case, transfer
 from tpvp.pipeline.jit import compile_kernels
+from tpvp.setcover.miss_model import plan_summary
 from tpvp.scene.organs import CODE
 from tpvp.metrics.views import (  # noqa: F401 (the notebook's statistics, used here too)
     coverage_curve,
@@ -213,8 +214,6 @@ def species_tables(raw: pd.DataFrame, split: str = "evaluation", helios_seed: in
     per_species = _with_seeds(per_species, raw, ["species", "view_space"])
     tables = {"overall": overall, "calibration_species": calibration_species, "per_species": per_species}
     if "predicted_coverage" in raw:  # how sure the evaluation species' plans were (tpvp.setcover.miss_model)
-        from tpvp.setcover.miss_model import plan_summary
-
         plans = helios[~calibration].rename(columns={"predicted_coverage": "predicted",
                                                      "predicted_coverage_lower": "lower"})
         tables["prediction"] = _with_seeds(plan_summary(plans), plans, ["view_space"])

@@ -11,6 +11,7 @@ import numpy as np
 import pandas as pd
 
 from tpvp.io.atomic import atomic_write_text
+from tpvp.viz.paper_gaps import gap_lines
 
 _PLOTLY_LOADED = False  # plotly.js is embedded once per kernel, in the first 3D view's output
 
@@ -150,7 +151,7 @@ def show_paper_table(ours: pd.DataFrame, paper: pd.DataFrame, csv_path, title: s
     display names from :data:`KEY_LABELS`) and write the wide one (every column, ours and the
     paper's side by side: :func:`beside_paper`; ``paper`` None: ``ours`` holds the paper's columns)
     to ``csv_path``, linked under the table. ``gaps``: the paper's table (``"I"``, ...): the values far
-    from the paper's are listed under it with why (:mod:`tpvp.experiments.paper_gaps`)."""
+    from the paper's are listed under it with why (:mod:`tpvp.viz.paper_gaps`)."""
     from IPython.display import Markdown, display
 
     wide = ours if paper is None else beside_paper(ours, paper, on=on, values=tuple(n for n, _ in values.values()))
@@ -159,8 +160,6 @@ def show_paper_table(ours: pd.DataFrame, paper: pd.DataFrame, csv_path, title: s
     _display_parts(paper_comparison(wide, None, on, values, keys, digits, KEY_LABELS), digits)
     display(csv_link(wide, Path(csv_path).name))
     if gaps is not None:
-        from tpvp.experiments.paper_gaps import gap_lines
-
         lines = gap_lines(wide, gaps, keys or on, values)
         if lines:
             display(Markdown("\n".join(lines)))
