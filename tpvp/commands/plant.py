@@ -15,7 +15,7 @@ from tpvp.pipeline.jit import compile_kernels, plant_pieces
 from tpvp.scene.normalise import check_session_pair
 from tpvp.scene.organs import LABEL_KINDS, check_organ_targets, organ_codes
 from tpvp.scene.samples import load_sample
-from tpvp.setcover.miss_model import coverage_statement, load_miss_model
+from tpvp.setcover.miss_model import coverage_statement
 from tpvp.simulate.frontier import coverage_frontier, write_frontier_files
 from tpvp.simulate.outputs import write_case_outputs
 from tpvp.simulate.single_plant import build_scene, run_case, transfer
@@ -30,8 +30,8 @@ def _print_case(result, summary, folder, compile_seconds, pieces):
             ("coverage of the oracle set", f"{100 * result.coverage:.2f} %"),
             *([("coverage per organ", ", ".join(f"{organ} {100 * value:.2f} %" for organ, value in
                                                 result.organ_coverage.items()))] if result.organ_coverage else []),
-            *([("true coverage, as the plan expects", coverage_statement(
-                result.predicted_coverage, result.predicted_coverage_lower, load_miss_model().alpha))]
+            *([("true coverage, as the plan expects", coverage_statement(result.predicted_coverage,
+                                                                         result.predicted_coverage_lower))]
               if math.isfinite(result.predicted_coverage) else []),
             ("path length", f"{result.path_length:.2f} m (planning frame; "
                             f"{summary['path_length_scan_m']:.3f} m in the scan frame)"),

@@ -213,11 +213,10 @@ def _session_plan(args) -> int:
         print(f"  views (captures included)         {result.n_views} ({result.n_views - len(left)} captured, "
               f"{len(left)} to capture: {_views_listed(left)})")
         if math.isfinite(result.predicted_coverage):
-            from tpvp.setcover.miss_model import coverage_statement, load_miss_model  # scipy: only a plan below 1
+            from tpvp.setcover.miss_model import coverage_statement  # scipy: only a plan below 1
 
-            statement = coverage_statement(result.predicted_coverage, result.predicted_coverage_lower,
-                                           load_miss_model().alpha)
-            print(f"  true coverage, as the plan expects {statement}")
+            print(f"  true coverage, as the plan expects "
+                  f"{coverage_statement(result.predicted_coverage, result.predicted_coverage_lower)}")
         print(f"  path length                       {result.path_length / session.scene.scan_scale:.3f} m "
               f"(world frame)")
         timings = result.timings

@@ -112,7 +112,8 @@ class MissModel:
     def to_dict(self) -> dict:
         return {"version": MODEL_VERSION, "features": list(self.features), "coefficients": list(self.coefficients),
                 "intercept": self.intercept, "planned": self.planned, "sphere_planned": self.sphere_planned,
-                "sphere": self.sphere, "lower": self.lower, "alpha": self.alpha, "margin": self.margin, "lowest_target": self.lowest_target, "calibration": self.calibration}
+                "sphere": self.sphere, "lower": self.lower, "alpha": self.alpha, "margin": self.margin,
+                "lowest_target": self.lowest_target, "calibration": self.calibration}
 
     @classmethod
     def from_dict(cls, data: dict, name: str = "miss model") -> "MissModel":
@@ -184,8 +185,8 @@ def fit_miss_model(rows, features: tuple, groups, cases, asked: float = 0.98, al
 
 def plan_summary(plans, by=("view_space",)):
     """Plans for one asked coverage summarised per ``by``: cases, mean views per exact optimum
-    (``views`` / ``optimum_views`` per case, where the plans have an optimum), true coverage (mean, lowest, shares below 97 % and
-    96 %) and, where the plans carry a ``lower`` bound, the share of cases below it and the mean
+    (``views`` / ``optimum_views`` per case, where the plans have an optimum), true coverage (mean,
+    lowest, shares below 97 % and 96 %) and, where the plans carry a ``lower`` bound, the share of cases below it and the mean
     |``predicted`` - true|."""
     aggregations = dict(cases=("views", "size"))
     if "optimum_views" in plans:
@@ -206,7 +207,8 @@ TARGETS = (("views <= 1.10x the optimum", "views_per_optimum", lambda v, alpha: 
            ("mean true coverage >= 98 %", "coverage_mean", lambda v, alpha: v >= 0.98),
            ("<= 5 % of cases below 97 %", "below_97", lambda v, alpha: v <= 0.05),
            ("no case below 96 %", "below_96", lambda v, alpha: v == 0),
-           ("share below the bound within 2 points of the stated share", "below_bound", lambda v, alpha: abs(v - alpha) <= 0.02 + 1e-12),
+           ("share below the bound within 2 points of the stated share", "below_bound",
+            lambda v, alpha: abs(v - alpha) <= 0.02 + 1e-12),
            ("mean |predicted - true| <= 0.5 point", "mean_abs_error", lambda v, alpha: v <= 0.005))
 
 
@@ -218,8 +220,10 @@ def targets_missed(summary, alpha: float) -> list[list[str]]:
             for _, row in summary.iterrows()]
 
 
-def coverage_statement(predicted: float, lower: float, alpha: float) -> str:
-    """How sure a plan is, in words: ``predicted 98.4 % (95 % sure of >= 97.6 %)``."""
+def coverage_statement(predicted: float, lower: float, alpha: float | None = None) -> str:
+    """How sure a plan is, in words: ``predicted 98.4 % (95 % sure of >= 97.6 %)``; ``alpha``: the
+    calibrated model's unless given."""
+    alpha = load_miss_model().alpha if alpha is None else alpha
     return f"predicted {100 * predicted:.1f} % ({100 * (1 - alpha):g} % sure of >= {100 * lower:.1f} %)"
 
 
