@@ -4,7 +4,7 @@ the opposite when the table does."""
 import numpy as np
 import pandas as pd
 
-from tpvp.experiments.claims import longest_stages, ordering, ours_against_gmc
+from tpvp.experiments.claims import compare, longest_stages, ordering, ours_against_gmc
 
 
 def _table1(ours_coverage: float) -> pd.DataFrame:
@@ -35,3 +35,11 @@ def test_the_longest_stage_is_found_per_covering_voxel_with_the_shared_stages():
                           columns=["stage", "cover_resolution_cm", "seconds"])
     assert longest_stages(stages) == ("At 5 cm the longest stage is selection (0.90 s); at 10 cm the longest stage is "
                                       "registration (0.85 s). Across them: visibility 0.08-0.55 s, selection 0.20-0.90 s.")
+
+
+def test_a_comparison_takes_its_word_from_the_values():
+    assert compare("Ours", 9.44, "GMC", 10.0, "views") == "Ours 9.44 views, 0.56 fewer than GMC (10.00)"
+    assert compare("Ours", 10.5, "GMC", 10.0, "views", digits=1) == "Ours 10.5 views, 0.5 more than GMC (10.0)"
+    assert (compare("one-shot", 98.7, "Ours", 99.0, "coverage", " %", words=("higher", "lower"), same=0.4)
+            == "one-shot 98.70 % coverage, within 0.4 % of Ours (99.00 %)")
+    assert "lower than" in compare("one-shot", 98.5, "Ours", 99.0, "coverage", " %", words=("higher", "lower"), same=0.4)

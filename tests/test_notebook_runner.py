@@ -10,7 +10,7 @@ import pytest
 from tpvp.errors import ConfigError
 from tools import notebooks as runner
 from tpvp.experiments import notebooks, shipped
-from tpvp.viz.notebook import beside_paper, mean_std, paper_comparison, table_parts
+from tpvp.viz.notebook import MAX_ROWS, beside_paper, conclusion, mean_std, paper_comparison, show_table, table_parts
 
 
 def _never():
@@ -81,6 +81,17 @@ def test_a_paper_table_is_compact_ours_beside_the_paper_with_the_difference():
     assert table.iloc[1].tolist() == ["new", "0.01", "5.00 ± 0.00 / – / –", "90.00 ± 1.00 / – / –"]
 
 
+def test_a_conclusion_says_how_the_paper_tables_agree_then_what_to_take_away():
+    said = conclusion(["Ours needs fewer views."], paper=["Table I: 3 of 4 values within 10 % of the paper's."])
+    assert said.splitlines() == [
+        "## Conclusion", "", "**Against the paper.**", "- Table I: 3 of 4 values within 10 % of the paper's.",
+        "- What differs from the paper's setting, and why, is listed in [deviations.md](../docs/deviations.md).", "",
+        "**What to take away.**", "- Ours needs fewer views."]
+    assert "- This notebook reproduces no table of the paper." in conclusion(["a finding"], paper=[])
+    with pytest.raises(ValueError, match="at least one finding"):
+        conclusion([], paper=[])
+
+
 def test_a_wide_table_is_shown_in_parts_that_repeat_its_keys():
     wide = pd.DataFrame({"case": ["a", "b"], "method": ["x", "y"], **{f"v{i}": [1.0, 2.0] for i in range(10)}})
     parts = table_parts(wide)
@@ -89,6 +100,29 @@ def test_a_wide_table_is_shown_in_parts_that_repeat_its_keys():
     one = table_parts(wide.iloc[:1])
     assert len(one) == 1 and one[0].columns.tolist() == ["quantity", "value"] and len(one[0]) == 12
     assert len(table_parts(wide.iloc[:, :5])) == 1 and table_parts(wide.iloc[:, :5])[0].equals(wide.iloc[:, :5])
+    # a numeric key (a session number, a re-planning setting) is repeated too; a numeric value is not
+    numbered = pd.DataFrame({"session": [2, 3], "replan_after": [0, 1], "views": [9, 8],
+                             **{f"v{i}": [1.0, 2.0] for i in range(8)}})
+    assert [p.columns[:3].tolist() for p in table_parts(numbered)] == [["session", "replan_after", "views"],
+                                                                      ["session", "replan_after", "v5"]]
+
+
+def test_a_long_table_shows_its_first_rows_and_links_every_row(tmp_path, monkeypatch):
+    import IPython.display
+
+    shown = []
+    monkeypatch.setattr(IPython.display, "display", lambda *objects: shown.extend(objects))
+    long = pd.DataFrame({"case": [f"c{i}" for i in range(MAX_ROWS + 5)], "views": range(MAX_ROWS + 5)})
+    show_table(long, tmp_path / "long.csv", "Long", merge_std=False)
+    assert pd.read_csv(tmp_path / "long.csv").equals(long)  # the CSV holds every row
+    rendered = [o for o in shown if hasattr(o, "data") and hasattr(o.data, "shape")]
+    assert [len(o.data) for o in rendered] == [MAX_ROWS]
+    texts = [str(getattr(o, "data", "")) for o in shown]
+    assert f"The first {MAX_ROWS} of {MAX_ROWS + 5} rows." in texts
+    assert any('download="long.csv"' in t and f"{MAX_ROWS + 5:,} rows" in t for t in texts)
+    shown.clear()
+    show_table(long.head(3), None, merge_std=False)
+    assert not any("download=" in str(getattr(o, "data", "")) for o in shown)  # short and narrow: no link
 
 
 def test_mean_std_merges_and_the_paper_stands_beside():

@@ -4,7 +4,7 @@ exactly those beyond the relative gap, each under the first explanation that cov
 import numpy as np
 import pandas as pd
 
-from tpvp.viz.paper_gaps import EXPLANATIONS, RELATIVE_GAP, gap_lines, large_gaps
+from tpvp.viz.paper_gaps import DEVIATIONS, EXPLANATIONS, RELATIVE_GAP, agreement, gap_lines, large_gaps
 
 VALUES = {"views": ("views", "views"), "coverage": ("coverage", "coverage (%)")}
 
@@ -44,3 +44,21 @@ def test_each_far_value_goes_under_the_first_explanation_that_covers_it():
     assert lines[3] == "- bundled, ours coverage (%) 50.00 / 99.00: not explained yet."
     assert len(lines) == 4  # 98 against 99 is within the gap
     assert gap_lines(wide.iloc[3:], "I", ["source", "method"], VALUES) == []
+
+
+def test_the_agreement_counts_the_values_near_the_papers_and_the_others_by_explanation():
+    wide = pd.DataFrame([{"source": "bundled", "method": "gmc", "coverage_mean": 97.0, "paper_coverage": 81.9,
+                          "views_mean": 10.0, "paper_views": np.nan},
+                         {"source": "bundled", "method": "ours", "coverage_mean": 50.0, "paper_coverage": 99.0,
+                          "views_mean": 10.0, "paper_views": 10.5},
+                         {"source": "generated", "method": "ours", "coverage_mean": 60.0, "paper_coverage": 99.0,
+                          "views_mean": np.nan, "paper_views": 9.0},
+                         {"source": "generated", "method": "gmc", "coverage_mean": 98.0, "paper_coverage": 99.0,
+                          "views_mean": 20.0, "paper_views": 10.0}])
+    # compared: 4 coverages and 2 views (a value either side missing is not compared); far: 3 coverages, 1 views
+    said = agreement(wide, "I", ["source", "method"], VALUES)
+    assert said == ("Table I: 2 of 6 values within 10 % of the paper's; of the other 4, 1 explained by GMC's map "
+                    f"and score, 2 explained by generated plants, 1 not explained yet ([why]({DEVIATIONS})).")
+    assert agreement(wide.iloc[:0], "I", ["source", "method"], VALUES) == "Table I: the paper reports none of these values."
+    assert agreement(wide.iloc[1:2].assign(coverage_mean=98.0), "I", ["source", "method"], VALUES) == \
+        "Table I: 2 of 2 values within 10 % of the paper's."

@@ -173,6 +173,57 @@ def test_grid_knn_matches_kdtree(k):
         assert np.all(np.diff(d2, axis=1) >= 0)
 
 
+def _ring_scan_knn(ref, queries, k):
+    """The grid search without skipping a cell, in plain Python: every cell of every ring scanned,
+    each point entering the k best only when strictly closer (so ties keep the first found)."""
+    from tpvp.registration.embedded_deformation import _grid_build
+
+    lo, h, dims, start, order, pts = _grid_build(ref)
+    margin = 1e-9 * h
+    idx, d2 = np.full((len(queries), k), -1), np.full((len(queries), k), np.inf)
+    for s, q in enumerate(queries):
+        c = np.clip(np.floor((q - lo) / h).astype(int), 0, dims - 1)
+        r = 0
+        while True:
+            ring = [(x, y, z) for x in range(max(c[0] - r, 0), min(c[0] + r, dims[0] - 1) + 1)
+                    for y in range(max(c[1] - r, 0), min(c[1] + r, dims[1] - 1) + 1)
+                    for z in range(max(c[2] - r, 0), min(c[2] + r, dims[2] - 1) + 1)
+                    if max(abs(x - c[0]), abs(y - c[1]), abs(z - c[2])) == r]
+            for x, y, z in ring:
+                cell = (x * dims[1] + y) * dims[2] + z
+                for j in range(start[cell], start[cell + 1]):
+                    d = float(((q - pts[j]) ** 2).sum())
+                    if d < d2[s, -1]:
+                        m = int(np.searchsorted(d2[s], d, side="right"))
+                        d2[s, m + 1:], idx[s, m + 1:] = d2[s, m:-1].copy(), idx[s, m:-1].copy()
+                        d2[s, m], idx[s, m] = d, order[j]
+            bounds = [q[a] - (lo[a] + (c[a] - r) * h) for a in range(3) if c[a] - r > 0]
+            bounds += [lo[a] + (c[a] + r + 1) * h - q[a] for a in range(3) if c[a] + r + 1 < dims[a]]
+            if not bounds or d2[s, -1] <= max(min(bounds) - margin, 0.0) ** 2:
+                break
+            r += 1
+    return idx, d2
+
+
+@pytest.mark.parametrize("k", [1, 3, 9])
+def test_grid_knn_keeps_the_first_found_of_equal_distances_as_a_full_ring_scan(k):
+    """Skipping the cells no closer than the k-th found changes nothing, ties included: the same
+    indices as scanning every cell of every ring (duplicate points, a lattice's equal distances)."""
+    rng = np.random.default_rng(8)
+    lattice = np.stack(np.meshgrid(*[np.arange(5.0)] * 3), -1).reshape(-1, 3) * 0.01
+    clouds = {"duplicates": np.repeat(rng.uniform(0, 0.02, size=(30, 3)), 3, axis=0),
+              "lattice": np.concatenate([lattice, lattice[:20]]),
+              "plant-like": np.concatenate([rng.normal(size=(150, 3)) * [0.05, 0.05, 0.002],
+                                            rng.normal(size=(50, 3)) * [0.002, 0.002, 0.08]])}
+    for name, ref in clouds.items():
+        queries = np.concatenate([ref[:40], ref[:40] + 0.005, rng.uniform(-0.1, 0.1, size=(20, 3))])
+        idx, d2 = np.empty((len(queries), k), np.int64), np.empty((len(queries), k))
+        _grid_knn(ref, queries, k, idx, d2)
+        expected_idx, expected_d2 = _ring_scan_knn(ref, queries, k)
+        np.testing.assert_array_equal(idx, expected_idx, err_msg=name)
+        np.testing.assert_array_equal(d2, expected_d2, err_msg=name)
+
+
 def test_kth_smallest_is_torch_lower_median():
     rng = np.random.default_rng(7)
     for n in (1, 2, 7, 8, 1000):

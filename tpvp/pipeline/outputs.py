@@ -101,7 +101,7 @@ def write_plan_outputs(folder, known, result, config, name: str = "case", extra_
                           + (f", {100 * result.coverage:.2f}% coverage, {result.path_length:.2f} m path" if measured
                              else f", {result.path_length / known.scan_scale:.3g} m path in the world frame "
                                   f"(drawn in the planning frame)")),
-              {"obstacle": result.obstacle,
+              {"obstacle": result.obstacle, "unit": "m" if measured else "planning units",
                "table_points": known.table_points if len(known.table_points) else None})]
     calls += measured.figures(folder) if measured else []
     truth = {"current_truth": (measured.plant, (120, 120, 120))} if measured else {}

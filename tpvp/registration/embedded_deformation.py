@@ -288,9 +288,11 @@ def _scan_cell(q, pts, order, start, cell, s, k, out_idx, out_d2):
 def _grid_knn(ref, queries, k, out_idx, out_d2):
     """The k nearest points of ``ref`` to each query, ascending squared distance: out_idx, out_d2
     (nq, k). Exact: rings of cells around the query's cell are scanned until no unscanned cell can
-    hold a closer point (equal distances keep the first found; k <= len(ref))."""
+    hold a closer point (equal distances keep the first found; k <= len(ref)). A cell no closer
+    than the k-th found so far is skipped: none of its points could enter, now or later, so the
+    result is that of scanning it."""
     lo, h, dims, start, order, pts = _grid_build(ref)
-    margin = 1e-9 * h  # rounding of the cell indices: stop only when clearly done
+    margin = 1e-9 * h  # rounding of the cell indices: stop or skip only when clearly done
     c = np.empty(3, np.int64)
     q = np.empty(3)
     for s in range(queries.shape[0]):
@@ -305,16 +307,25 @@ def _grid_knn(ref, queries, k, out_idx, out_d2):
         while True:
             for ix in range(max(c[0] - r, 0), min(c[0] + r, dims[0] - 1) + 1):
                 edge_x = abs(ix - c[0]) == r
+                gap = max(lo[0] + ix * h - q[0], q[0] - (lo[0] + (ix + 1) * h), 0.0)
+                gx2 = max(gap - margin, 0.0) ** 2  # squared distance to the slab of cells ix
+                if gx2 >= out_d2[s, k - 1]:
+                    continue
                 for iy in range(max(c[1] - r, 0), min(c[1] + r, dims[1] - 1) + 1):
+                    gap = max(lo[1] + iy * h - q[1], q[1] - (lo[1] + (iy + 1) * h), 0.0)
+                    gxy2 = gx2 + max(gap - margin, 0.0) ** 2
+                    if gxy2 >= out_d2[s, k - 1]:
+                        continue
                     base = (ix * dims[1] + iy) * dims[2]
-                    if edge_x or abs(iy - c[1]) == r:  # a face of the ring: the whole column
-                        for iz in range(max(c[2] - r, 0), min(c[2] + r, dims[2] - 1) + 1):
-                            _scan_cell(q, pts, order, start, base + iz, s, k, out_idx, out_d2)
-                    else:  # inside the ring's shadow: only the column's two end cells are new
-                        if c[2] - r >= 0:
-                            _scan_cell(q, pts, order, start, base + c[2] - r, s, k, out_idx, out_d2)
-                        if c[2] + r < dims[2]:
-                            _scan_cell(q, pts, order, start, base + c[2] + r, s, k, out_idx, out_d2)
+                    face = edge_x or abs(iy - c[1]) == r  # a face of the ring: the whole column
+                    first, last = max(c[2] - r, 0), min(c[2] + r, dims[2] - 1)
+                    iz = first if face else c[2] - r  # inside the ring's shadow: the column's two end cells
+                    while iz <= last:
+                        if iz >= 0 and start[base + iz] < start[base + iz + 1]:
+                            gap = max(lo[2] + iz * h - q[2], q[2] - (lo[2] + (iz + 1) * h), 0.0)
+                            if gxy2 + max(gap - margin, 0.0) ** 2 < out_d2[s, k - 1]:
+                                _scan_cell(q, pts, order, start, base + iz, s, k, out_idx, out_d2)
+                        iz += 1 if face else 2 * r
             # every unscanned cell lies beyond a face of the scanned block: bound its distance
             lb = np.inf
             for a in range(3):

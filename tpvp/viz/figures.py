@@ -25,14 +25,14 @@ def _subsample(points, *arrays, limit=_MAX_POINTS):
     return (points[keep], *(np.asarray(a)[keep] for a in arrays))
 
 
-def _equal_axes(ax, points):
+def _equal_axes(ax, points, unit: str = "m"):
     lo, hi = points.min(axis=0), points.max(axis=0)
     centre, half = (lo + hi) / 2, (hi - lo).max() / 2
     for setter, c in zip((ax.set_xlim, ax.set_ylim, ax.set_zlim), centre):
         setter(c - half, c + half)
-    ax.set_xlabel("x (m)")
-    ax.set_ylabel("y (m)")
-    ax.set_zlabel("z (m)")
+    ax.set_xlabel(f"x ({unit})")
+    ax.set_ylabel(f"y ({unit})")
+    ax.set_zlabel(f"z ({unit})")
 
 
 RASTER_POINTS = 2000
@@ -68,13 +68,14 @@ def _sphere_wireframe(ax, centre, radius, **style):
 
 
 def plot_plan(path, plant_points, candidates, executed, selected, path_polyline, title="", *,
-              obstacle=None, table_points=None) -> Path:
+              obstacle=None, table_points=None, unit: str = "m") -> Path:
     """Plant, candidate views (grey), executed warm-up views (black), selected views (numbered in
     execution order) and the global path (purple).
 
     ``obstacle=(centre, radius)`` adds the obstacle sphere the path goes around (wireframe, radius
     in the legend); ``table_points`` ((M, 3), e.g. the table voxel centres) adds the supporting
-    table (light brown). Both default to None (not drawn).
+    table (light brown). Both default to None (not drawn). ``unit``: of the coordinates (a real
+    session plans in a scaled planning frame, not in metres).
     """
     fig = plt.figure(figsize=(7, 6))
     ax = fig.add_subplot(projection="3d")
@@ -90,7 +91,7 @@ def plot_plan(path, plant_points, candidates, executed, selected, path_polyline,
         centre = np.asarray(centre, dtype=np.float64).reshape(3)
         radius = float(radius)
         _sphere_wireframe(ax, centre, radius, color="tab:orange", lw=0.4, alpha=0.45,
-                          label=f"obstacle sphere (r = {radius:.3f} m)")
+                          label=f"obstacle sphere (r = {radius:.3f} {unit})")
         ax.scatter(*centre, s=25, c="tab:orange", marker="+")
         extent.append(np.array([centre - radius, centre + radius]))
     candidates = extent[0]
@@ -104,7 +105,7 @@ def plot_plan(path, plant_points, candidates, executed, selected, path_polyline,
     polyline = np.asarray(path_polyline).reshape(-1, 3)
     if len(polyline):
         ax.plot(*polyline.T, c="purple", lw=1.5, label="global path")
-    _equal_axes(ax, np.concatenate([*extent, plant]))
+    _equal_axes(ax, np.concatenate([*extent, plant]), unit)
     legend = ax.legend(loc="upper left", fontsize=7)
     for handle in legend.legend_handles:
         handle.set_alpha(1.0)

@@ -11,9 +11,12 @@ import numpy as np
 import pandas as pd
 
 from tpvp.io.atomic import atomic_write_text
-from tpvp.viz.paper_gaps import gap_lines
+from tpvp.viz.paper_gaps import DEVIATIONS, agreement, gap_lines
 
 _PLOTLY_LOADED = False  # plotly.js is embedded once per kernel, in the first 3D view's output
+# How each paper table shown in this kernel agrees with the paper (show_paper_table with ``gaps``),
+# for the notebook's conclusion (show_conclusion).
+_AGREEMENTS: dict = {}
 
 
 def show(*figures):
@@ -46,6 +49,12 @@ def mean_std(table: pd.DataFrame, digits: int = 2) -> pd.DataFrame:
 #: The most columns a displayed table has: a wider one is shown in parts (its key columns repeated),
 #: so every table fits a page's column without a sideways scroll.
 MAX_COLUMNS = 8
+#: The most rows a displayed table shows: a longer one shows its first rows and links its CSV.
+MAX_ROWS = 25
+#: Columns that name what a row is about (repeated in every part of a wide table) even when numeric.
+KEY_COLUMNS = {"source", "view_space", "species", "method", "budget", "target", "reference", "cover_resolution_cm",
+               "prior", "sigma_t_m", "sigma_r_deg", "icp", "session", "replan_after", "seed", "plant", "arm", "room",
+               "case", "rule", "noise", "date", "plan", "capture", "stage"}
 
 
 def show_table(frame: pd.DataFrame, csv_path=None, title: str | None = None, *, merge_std: bool = True,
@@ -53,7 +62,8 @@ def show_table(frame: pd.DataFrame, csv_path=None, title: str | None = None, *, 
     """Write ``frame`` as CSV to ``csv_path`` (atomically; the raw numbers, std columns kept) and
     display it as a rendered table (mean ± std merged unless ``merge_std=False``): a one-row table
     as quantity-value pairs, a table of more than :data:`MAX_COLUMNS` columns in parts that repeat
-    its key (text) columns, with a link to download the CSV. Returns nothing, so a cell ending in
+    its key columns, a table of more than :data:`MAX_ROWS` rows by its first rows; a table cut in
+    either way links its CSV (every row and column). Returns nothing, so a cell ending in
     ``show_table(...)`` shows the table once."""
     from IPython.display import Markdown, display
 
@@ -61,15 +71,18 @@ def show_table(frame: pd.DataFrame, csv_path=None, title: str | None = None, *, 
         atomic_write_text(csv_path, frame.to_csv(index=False))
     if title:
         display(Markdown(f"**{title}**"))
-    _display_parts(mean_std(frame, digits) if merge_std else frame.round(digits + 1), digits + 1)
-    if csv_path is not None and len(frame.columns) > MAX_COLUMNS:
-        display(csv_link(frame, Path(csv_path).name))
+    shown = mean_std(frame, digits) if merge_std else frame.round(digits + 1)
+    _display_parts(shown.head(MAX_ROWS), digits + 1)
+    if len(frame) > MAX_ROWS:
+        display(Markdown(f"The first {MAX_ROWS} of {len(frame)} rows."))
+    if len(frame.columns) > MAX_COLUMNS or len(frame) > MAX_ROWS:
+        display(csv_link(frame, Path(csv_path).name if csv_path is not None else "table.csv"))
 
 
 def table_parts(frame: pd.DataFrame, max_columns: int = MAX_COLUMNS) -> list[pd.DataFrame]:
     """``frame`` as tables of at most ``max_columns`` columns: one row with more than 4 columns as
     (quantity, value) rows; more columns than ``max_columns`` as parts that each repeat the leading
-    key columns (text, up to 3)."""
+    key columns (text, or named in :data:`KEY_COLUMNS`; up to 3)."""
     if len(frame) == 1 and len(frame.columns) > 4:
         return [pd.DataFrame({"quantity": [str(c) for c in frame.columns],
                               "value": [_cell(v) for v in frame.iloc[0]]})]
@@ -77,7 +90,9 @@ def table_parts(frame: pd.DataFrame, max_columns: int = MAX_COLUMNS) -> list[pd.
         return [frame]
     keys = []
     for column in frame.columns[:3]:
-        if frame[column].dtype != object and not isinstance(frame[column].dtype, pd.StringDtype):
+        text = frame[column].dtype == object or isinstance(frame[column].dtype, pd.StringDtype)
+        if not (text or str(column) in KEY_COLUMNS or KEY_LABELS.get(str(column)) is not None
+                or str(column) in KEY_LABELS.values()):
             break
         keys.append(column)
     rest = [c for c in frame.columns if c not in keys]
@@ -163,6 +178,30 @@ def show_paper_table(ours: pd.DataFrame, paper: pd.DataFrame, csv_path, title: s
         lines = gap_lines(wide, gaps, keys or on, values)
         if lines:
             display(Markdown("\n".join(lines)))
+        _AGREEMENTS[title] = agreement(wide, gaps, keys or on, values)
+
+
+def conclusion(takeaways: list[str], paper: list[str] | None = None) -> str:
+    """A notebook's conclusion in Markdown: how its paper tables agree with the paper (``paper``: a
+    line per table, by default those :func:`show_paper_table` showed in this kernel; empty: the
+    notebook reproduces no paper table), then what to take away, each a sentence written from the
+    data (:mod:`tpvp.experiments.claims`)."""
+    paper = list(_AGREEMENTS.values()) if paper is None else paper
+    if not takeaways:
+        raise ValueError("a conclusion needs at least one finding to take away")
+    lines = ["## Conclusion", "", "**Against the paper.**"]
+    lines += [f"- {line}" for line in paper] if paper else ["- This notebook reproduces no table of the paper."]
+    if paper:
+        lines.append(f"- What differs from the paper's setting, and why, is listed in [deviations.md]({DEVIATIONS}).")
+    lines += ["", "**What to take away.**"] + [f"- {finding}" for finding in takeaways]
+    return "\n".join(lines)
+
+
+def show_conclusion(takeaways: list[str], paper: list[str] | None = None) -> None:
+    """Display :func:`conclusion`: the last cell of every notebook."""
+    from IPython.display import Markdown, display
+
+    display(Markdown(conclusion(takeaways, paper)))
 
 
 #: The plants' tables (I-IV): our column -> (the paper's column, header with its unit).
