@@ -43,3 +43,11 @@ def test_a_comparison_takes_its_word_from_the_values():
     assert (compare("one-shot", 98.7, "Ours", 99.0, "coverage", " %", words=("higher", "lower"), same=0.4)
             == "one-shot 98.70 % coverage, within 0.4 % of Ours (99.00 %)")
     assert "lower than" in compare("one-shot", 98.5, "Ours", 99.0, "coverage", " %", words=("higher", "lower"), same=0.4)
+
+
+def test_compare_gives_a_gap_between_percentages_in_points():
+    assert (compare("Ours", 98.9, "GMC", 100.0, "coverage", " %", words=("higher", "lower"), gap_unit=" points")
+            == "Ours 98.90 % coverage, 1.10 points lower than GMC (100.00 %)")
+    assert (compare("Ours", 99.8, "GMC", 100.0, "coverage", " %", same=0.5, gap_unit=" points")
+            == "Ours 99.80 % coverage, within 0.5 points of GMC (100.00 %)")
+    assert compare("Ours", 9.0, "GMC", 10.0, "views", gap_unit=None) == compare("Ours", 9.0, "GMC", 10.0, "views")

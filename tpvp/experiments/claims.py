@@ -63,10 +63,11 @@ def longest_stages(stages: pd.DataFrame, per: str = "cover_resolution_cm") -> st
 
 
 def compare(first: str, a: float, second: str, b: float, quantity: str, unit: str = "", digits: int = 2,
-            words: tuple = ("more", "fewer"), same: float = 0.0) -> str:
+            words: tuple = ("more", "fewer"), same: float = 0.0, gap_unit: str | None = None) -> str:
     """``first`` against ``second`` on one quantity, in the word the values support: "Ours 9.44
-    views, 0.56 fewer than GMC (10.00)"; within ``same`` of each other: "within 0.5 of"."""
-    gap = a - b
-    relation = (f"within {same:g}{unit} of" if abs(gap) <= same
-                else f"{abs(gap):.{digits}f}{unit} {words[0] if gap > 0 else words[1]} than")
+    views, 0.56 fewer than GMC (10.00)"; within ``same`` of each other: "within 0.5 of". The gap
+    is in ``gap_unit`` (None: the values' ``unit``), e.g. ``" points"`` between two values in %."""
+    gap, gap_unit = a - b, unit if gap_unit is None else gap_unit
+    relation = (f"within {same:g}{gap_unit} of" if abs(gap) <= same
+                else f"{abs(gap):.{digits}f}{gap_unit} {words[0] if gap > 0 else words[1]} than")
     return f"{first} {a:.{digits}f}{unit} {quantity}, {relation} {second} ({b:.{digits}f}{unit})"
