@@ -67,6 +67,10 @@ def test_stored_without_outputs_or_local_paths(path):
     # the parameters cell: the switch, what each mode costs, where the outputs go
     assert re.search(r"^full = False\s+#.*\b\d+ (s|min)\b", first, re.M), first  # a time, in s or min
     assert re.search(r"^output = \"\.\./outputs/reader/", first, re.M), first
+    # a markdown cell under the title says what each mode computes (the comment above says it only in code)
+    modes = [c for c in notebook["cells"][:3] if c["cell_type"] == "markdown"
+             and "".join(c["source"]).startswith("**What each mode computes.**")]
+    assert modes, f"{path.name}: no markdown cell says what reader's mode computes"
 
 
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=[p.stem for p in NOTEBOOKS])
