@@ -45,17 +45,24 @@ def ordering(ours: dict, paper: dict, what: dict) -> str:
     return "; ".join(said) + "."
 
 
+def longest_stage(stages: pd.DataFrame, per: str = "cover_resolution_cm") -> dict:
+    """Per value of ``per`` (ascending): the stage that took longest, with the stages shared by
+    every value (``per`` NaN), and its seconds."""
+    shared = stages[stages[per].isna()]
+    longest = {}
+    for value in sorted(stages[per].dropna().unique()):
+        own = pd.concat([shared, stages[stages[per] == value]])
+        row = own.loc[own["seconds"].idxmax()]
+        longest[value] = (row["stage"], row["seconds"])
+    return longest
+
+
 def longest_stages(stages: pd.DataFrame, per: str = "cover_resolution_cm") -> str:
     """``stages``: ``stage``, ``per`` (NaN for a stage shared by every value of ``per``) and
     ``seconds``. Per value of ``per``: the stage that took longest, then how the per-value stages
     range."""
-    shared = stages[stages[per].isna()]
-    said = []
-    for value in sorted(stages[per].dropna().unique()):
-        own = pd.concat([shared, stages[stages[per] == value]])
-        longest = own.loc[own["seconds"].idxmax()]
-        said.append(f"at {value:g} {per.rsplit('_', 1)[-1]} the longest stage is {longest['stage']} "
-                    f"({longest['seconds']:.2f} s)")
+    said = [f"at {value:g} {per.rsplit('_', 1)[-1]} the longest stage is {stage} ({seconds:.2f} s)"
+            for value, (stage, seconds) in longest_stage(stages, per).items()]
     ranges = [f"{stage} {group['seconds'].min():.2f}-{group['seconds'].max():.2f} s"
               for stage, group in stages.dropna(subset=[per]).groupby("stage", sort=False)]
     said = "; ".join(said)

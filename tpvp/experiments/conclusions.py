@@ -402,9 +402,8 @@ def planning_time_findings(timing: pd.DataFrame, nbv: pd.DataFrame, paper: pd.Da
     per_voxel = timing.set_index("cover_resolution_cm")[[f"seconds_{n}" for n in _STAGES]]
     longest = per_voxel.idxmax(axis=1).str.removeprefix("seconds_")
     live_longest = {}  # the live run: the longest stage -> the covering voxels where it is the longest
-    for value in sorted(stages["cover_resolution_cm"].dropna().unique(), reverse=True):
-        own = pd.concat([stages[stages["cover_resolution_cm"].isna()], stages[stages["cover_resolution_cm"] == value]])
-        live_longest.setdefault(own.loc[own["seconds"].idxmax(), "stage"], []).append(f"{value:g}")
+    for value, (stage, _) in reversed(claims.longest_stage(stages).items()):
+        live_longest.setdefault(stage, []).append(f"{value:g}")
     paper_cores, our_cores = _cores(" ".join(paper["note"].dropna())), _cores(source)
     share = 100 * timing["seconds_visibility"] / timing["seconds_planning"]
     ratio = timing["paper_visibility_s"] / timing["seconds_visibility"]

@@ -51,10 +51,10 @@ def mean_std(table: pd.DataFrame, digits: int = 2) -> pd.DataFrame:
 MAX_COLUMNS = 8
 #: The most rows a displayed table shows: a longer one shows its first rows and links its CSV.
 MAX_ROWS = 25
-#: Columns that name what a row is about (repeated in every part of a wide table) even when numeric.
-KEY_COLUMNS = {"source", "view_space", "species", "method", "budget", "target", "reference", "cover_resolution_cm",
-               "prior", "sigma_t_m", "sigma_r_deg", "icp", "session", "replan_after", "seed", "plant", "arm", "room",
-               "case", "rule", "noise", "date", "plan", "capture", "stage"}
+#: Columns beyond the paper tables' keys (:data:`KEY_LABELS`) that name what a row is about (repeated
+#: in every part of a wide table) even when numeric.
+KEY_COLUMNS = {"session", "replan_after", "seed", "plant", "arm", "room", "case", "rule", "noise", "date", "plan",
+               "capture", "stage"}
 
 
 def show_table(frame: pd.DataFrame, csv_path=None, title: str | None = None, *, merge_std: bool = True,
@@ -91,7 +91,7 @@ def table_parts(frame: pd.DataFrame, max_columns: int = MAX_COLUMNS) -> list[pd.
     keys = []
     for column in frame.columns[:3]:
         text = frame[column].dtype == object or isinstance(frame[column].dtype, pd.StringDtype)
-        if not (text or str(column) in KEY_COLUMNS or KEY_LABELS.get(str(column)) is not None
+        if not (text or str(column) in KEY_COLUMNS or str(column) in KEY_LABELS
                 or str(column) in KEY_LABELS.values()):
             break
         keys.append(column)
